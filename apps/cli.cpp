@@ -1,0 +1,61 @@
+#include "apps/cli.h"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <exception>
+
+#include "apps/commands.h"
+#include "calib/error.h"
+
+namespace omni {
+
+int& CommandExitCode() {
+  static int exit_code = 0;
+  return exit_code;
+}
+
+int RunCommandLine(int argc, char** argv) {
+  CLI::App app{
+      "omnisculpt: camera poses, sparse points and a 2-manifold surface of a city from the "
+      "images of an omnidirectional multi-camera rig, with synthetic drives and evaluation."};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "omnisculpt 0.1.0");
+  GlobalOptions global;
+  app.add_flag("-q,--quiet", global.quiet, "Print warnings and errors only");
+  app.add_flag("-v,--verbose", global.verbose, "Print debug messages");
+
+  RegisterCalibCommands(app, global);
+  RegisterSynthCommand(app, global);
+  RegisterSfmCommand(app, global);
+  RegisterSurfaceCommand(app, global);
+  RegisterEvalCommands(app, global);
+
+  app.parse_complete_callback([&global] {
+    spdlog::set_pattern("%^[%L]%$ %v");
+    spdlog::set_level(global.quiet     ? spdlog::level::warn
+                      : global.verbose ? spdlog::level::debug
+                                       : spdlog::level::info);
+  });
+
+  CommandExitCode() = 0;
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::Success& success) {
+    return app.exit(success);  // --help, --version
+  } catch (const CLI::ParseError& error) {
+    // One line, like every other bad input (CLI11's own exit() prints two).
+    std::fprintf(stderr, "omnisculpt: error: %s (see --help)\n", error.what());
+    return 2;
+  } catch (const InputError& error) {
+    std::fprintf(stderr, "omnisculpt: error: %s\n", error.what());
+    return 2;
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "omnisculpt: internal error: %s\n", error.what());
+    return 1;
+  }
+  return CommandExitCode();
+}
+
+}  // namespace omni

@@ -1,0 +1,27 @@
+#pragma once
+// The subcommands of `omnisculpt`, one registration function each (COLMAP's exe/colmap.cc
+// habit: a table of subcommands, each a thin layer over the libraries). A registration adds
+// its subcommand(s) to the app and sets the callback that runs it; the callback throws
+// InputError on bad input and returns through CommandResult.
+
+#include <CLI/CLI.hpp>
+
+namespace omni {
+
+// Options every subcommand shares.
+struct GlobalOptions {
+  bool quiet = false;    // no progress, warnings and errors only
+  bool verbose = false;  // debug logging
+};
+
+// Exit code of the subcommand that ran (0 unless it set one: e.g. mesh-check of a
+// non-manifold mesh sets 1).
+int& CommandExitCode();
+
+void RegisterCalibCommands(CLI::App& app, const GlobalOptions& global);
+void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global);
+void RegisterEvalCommands(CLI::App& app, const GlobalOptions& global);
+void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global);
+void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global);
+
+}  // namespace omni

@@ -1,0 +1,232 @@
+#include "calib/drive.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cctype>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <system_error>
+
+#include "calib/error.h"
+#include "calib/rig_io.h"
+
+namespace omni {
+namespace {
+
+// How many incomplete frames the warning names before giving only their count.
+constexpr size_t kIncompleteFramesNamedInWarning = 5;
+
+bool IsDigit(char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; }
+
+std::string ToLower(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return text;
+}
+
+std::string JoinWords(const std::vector<std::string>& words, const std::string& separator) {
+  std::string joined;
+  for (size_t i = 0; i < words.size(); ++i) {
+    if (i > 0) joined += separator;
+    joined += words[i];
+  }
+  return joined;
+}
+
+// Image files of one camera folder: frame name (file stem) -> file name.
+std::map<std::string, std::string> ListImages(const std::filesystem::path& camera_folder,
+                                              const DriveOptions& options) {
+  std::map<std::string, std::string> files;
+  std::error_code error;
+  std::filesystem::directory_iterator it(camera_folder, error);
+  if (error) throw InputError(camera_folder, "", "cannot list folder: " + error.message());
+  for (const std::filesystem::directory_entry& entry : it) {
+    std::error_code status_error;
+    if (!entry.is_regular_file(status_error)) continue;
+    const std::filesystem::path& file = entry.path();
+    const std::string extension = ToLower(file.extension().string());
+    if (std::find(options.image_extensions.begin(), options.image_extensions.end(), extension) ==
+        options.image_extensions.end()) {
+      continue;
+    }
+    const std::string frame = file.stem().string();
+    const std::string name = file.filename().string();
+    auto [existing, inserted] = files.emplace(frame, name);
+    if (!inserted) {
+      const std::string first = std::min(existing->second, name);
+      const std::string second = std::max(existing->second, name);
+      throw InputError(camera_folder, "",
+                       "two images for frame \"" + frame + "\": " + first + " and " + second);
+    }
+  }
+  return files;
+}
+
+}  // namespace
+
+std::string DriveOptions::Check() const {
+  if (image_extensions.empty()) return "image_extensions: expected at least one extension";
+  for (const std::string& extension : image_extensions) {
+    if (extension.size() < 2 || extension[0] != '.' || extension != ToLower(extension)) {
+      return "image_extensions: expected lower-case extensions with the dot (\".png\"), got \"" +
+             extension + "\"";
+    }
+  }
+  if (min_frames < 1) return "min_frames: expected at least 1, got " + std::to_string(min_frames);
+  return "";
+}
+
+bool NaturalLess(const std::string& a, const std::string& b) {
+  size_t i = 0;
+  size_t j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (IsDigit(a[i]) && IsDigit(b[j])) {
+      size_t a_end = i;
+      while (a_end < a.size() && IsDigit(a[a_end])) ++a_end;
+      size_t b_end = j;
+      while (b_end < b.size() && IsDigit(b[b_end])) ++b_end;
+      // Skip leading zeros (keeping one digit), then the longer run is the larger number.
+      size_t a_start = i;
+      while (a_start + 1 < a_end && a[a_start] == '0') ++a_start;
+      size_t b_start = j;
+      while (b_start + 1 < b_end && b[b_start] == '0') ++b_start;
+      const size_t a_length = a_end - a_start;
+      const size_t b_length = b_end - b_start;
+      if (a_length != b_length) return a_length < b_length;
+      const int order = a.compare(a_start, a_length, b, b_start, b_length);
+      if (order != 0) return order < 0;
+      i = a_end;
+      j = b_end;
+    } else {
+      if (a[i] != b[j]) {
+        return static_cast<unsigned char>(a[i]) < static_cast<unsigned char>(b[j]);
+      }
+      ++i;
+      ++j;
+    }
+  }
+  const bool a_done = i == a.size();
+  const bool b_done = j == b.size();
+  if (a_done != b_done) return a_done;
+  // Equal as numbers ("01" and "1"): order by the plain text so the order stays strict.
+  return a < b;
+}
+
+Drive Drive::Open(const std::filesystem::path& folder, const DriveOptions& options) {
+  const std::string option_problem = options.Check();
+  if (!option_problem.empty()) throw InputError("", "drive options", option_problem);
+
+  std::error_code error;
+  if (!std::filesystem::is_directory(folder, error)) {
+    throw InputError(folder, "",
+                     std::filesystem::exists(folder, error) ? "not a folder" : "no such folder");
+  }
+  Drive drive;
+  drive.folder_ = folder;
+  drive.rig_ = ReadRigJson(folder / "rig.json");
+
+  const std::filesystem::path images = folder / "images";
+  if (!std::filesystem::is_directory(images, error)) {
+    throw InputError(images, "",
+                     "missing folder (expected images/<camera>/ for each camera of rig.json)");
+  }
+
+  // Per camera: frame name -> file name.
+  const size_t num_cameras = drive.rig_.NumCameras();
+  std::vector<std::map<std::string, std::string>> camera_files(num_cameras);
+  for (size_t camera = 0; camera < num_cameras; ++camera) {
+    const std::string& name = drive.rig_.cameras[camera].name;
+    const std::filesystem::path camera_folder = images / name;
+    if (!std::filesystem::is_directory(camera_folder, error)) {
+      throw InputError(camera_folder, "",
+                       "missing camera folder (rig.json has a camera \"" + name + "\")");
+    }
+    camera_files[camera] = ListImages(camera_folder, options);
+    if (camera_files[camera].empty()) {
+      throw InputError(
+          camera_folder, "",
+          "no images (expected files ending in " + JoinWords(options.image_extensions, ", ") + ")");
+    }
+  }
+
+  std::vector<std::string> all_frames;
+  for (const auto& files : camera_files) {
+    for (const auto& [frame, file] : files) all_frames.push_back(frame);
+  }
+  std::sort(all_frames.begin(), all_frames.end(), NaturalLess);
+  all_frames.erase(std::unique(all_frames.begin(), all_frames.end()), all_frames.end());
+
+  drive.image_files_.assign(num_cameras, {});
+  for (const std::string& frame : all_frames) {
+    IncompleteFrame incomplete{frame, {}};
+    for (size_t camera = 0; camera < num_cameras; ++camera) {
+      if (camera_files[camera].count(frame) == 0) {
+        incomplete.missing_cameras.push_back(drive.rig_.cameras[camera].name);
+      }
+    }
+    if (!incomplete.missing_cameras.empty()) {
+      drive.incomplete_frames_.push_back(std::move(incomplete));
+      continue;
+    }
+    drive.frame_names_.push_back(frame);
+    for (size_t camera = 0; camera < num_cameras; ++camera) {
+      drive.image_files_[camera].push_back(camera_files[camera].at(frame));
+    }
+  }
+
+  if (!drive.incomplete_frames_.empty()) {
+    std::vector<std::string> examples;
+    for (size_t i = 0; i < drive.incomplete_frames_.size() && i < kIncompleteFramesNamedInWarning;
+         ++i) {
+      const IncompleteFrame& incomplete = drive.incomplete_frames_[i];
+      examples.push_back(incomplete.frame_name + " (missing in " +
+                         JoinWords(incomplete.missing_cameras, ", ") + ")");
+    }
+    if (drive.incomplete_frames_.size() > kIncompleteFramesNamedInWarning)
+      examples.push_back("...");
+    spdlog::warn("{}: {} frame(s) missing in some camera folders are not used: {}", images.string(),
+                 drive.incomplete_frames_.size(), JoinWords(examples, "; "));
+  }
+
+  if (static_cast<int>(drive.frame_names_.size()) < options.min_frames) {
+    throw InputError(folder, "",
+                     "drive too short: " + std::to_string(drive.frame_names_.size()) +
+                         " complete frames, at least " + std::to_string(options.min_frames) +
+                         " needed");
+  }
+  return drive;
+}
+
+std::filesystem::path Drive::ImagePath(size_t frame, size_t camera) const {
+  return folder_ / "images" / rig_.cameras.at(camera).name / image_files_.at(camera).at(frame);
+}
+
+cv::Mat Drive::LoadGray(size_t frame, size_t camera) const {
+  const std::filesystem::path file = ImagePath(frame, camera);
+  cv::Mat image;
+  try {
+    image = cv::imread(file.string(), cv::IMREAD_GRAYSCALE);
+  } catch (const cv::Exception&) {
+    image.release();  // a codec that throws on a corrupt file is treated as one that fails
+  }
+  if (image.empty()) throw InputError(file, "", "cannot read image (missing or corrupt)");
+  if (image.depth() != CV_8U) {
+    // IMREAD_GRAYSCALE already gives 8 bits; this only guards against a codec that does not.
+    const double scale = image.depth() == CV_16U ? 1.0 / 256.0 : 1.0;
+    cv::Mat converted;
+    image.convertTo(converted, CV_8U, scale);
+    image = converted;
+  }
+  const Camera& rig_camera = rig_.cameras.at(camera);
+  if (image.cols != rig_camera.width || image.rows != rig_camera.height) {
+    throw InputError(file, "",
+                     "image is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
+                         ", rig.json gives camera " + rig_camera.name + " " +
+                         std::to_string(rig_camera.width) + "x" +
+                         std::to_string(rig_camera.height));
+  }
+  return image;
+}
+
+}  // namespace omni

@@ -1,0 +1,67 @@
+#pragma once
+// A drive folder (DESIGN.md §4):
+//   drive/rig.json
+//   drive/images/<camera name>/<frame>.png|jpg     same frame names in every camera folder
+//   drive/gt/poses.tum, drive/gt/mesh.ply           optional ground truth
+// Frames are the names present in every camera folder, in natural order ("2" before "10").
+// Frames missing in some camera are reported (incomplete_frames()), never silently dropped.
+// Images are loaded lazily, as 8-bit grey, and their size is checked against rig.json.
+
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "calib/rig.h"
+
+namespace omni {
+
+struct DriveOptions {
+  // File extensions recognised as images (lower case, with the dot).
+  std::vector<std::string> image_extensions = {".png", ".jpg", ".jpeg"};
+  // Fewest complete frames a drive must have to be opened.
+  int min_frames = 1;
+
+  std::string Check() const;
+};
+
+struct IncompleteFrame {
+  std::string frame_name;
+  std::vector<std::string> missing_cameras;
+};
+
+class Drive {
+ public:
+  // Reads rig.json and lists the images. Throws InputError (missing or malformed rig.json,
+  // missing camera folder, empty folder, fewer than min_frames complete frames).
+  static Drive Open(const std::filesystem::path& folder, const DriveOptions& options = {});
+
+  const std::filesystem::path& folder() const { return folder_; }
+  const Rig& rig() const { return rig_; }
+  size_t NumFrames() const { return frame_names_.size(); }
+  const std::string& FrameName(size_t frame) const { return frame_names_.at(frame); }
+  const std::vector<std::string>& frame_names() const { return frame_names_; }
+  // Frames present in some camera folders only; they are not among the frames.
+  const std::vector<IncompleteFrame>& incomplete_frames() const { return incomplete_frames_; }
+
+  std::filesystem::path ImagePath(size_t frame, size_t camera) const;
+  // The image as 8-bit grey. Throws InputError naming the file if it is missing, corrupt, or not
+  // the size rig.json gives for that camera.
+  cv::Mat LoadGray(size_t frame, size_t camera) const;
+
+  std::filesystem::path GroundTruthPosesPath() const { return folder_ / "gt" / "poses.tum"; }
+  std::filesystem::path GroundTruthMeshPath() const { return folder_ / "gt" / "mesh.ply"; }
+
+ private:
+  std::filesystem::path folder_;
+  Rig rig_;
+  std::vector<std::string> frame_names_;
+  // image_files_[camera][frame]: file name inside images/<camera>/.
+  std::vector<std::vector<std::string>> image_files_;
+  std::vector<IncompleteFrame> incomplete_frames_;
+};
+
+// "2" < "10" < "a2" < "a10": digit runs compare by value.
+bool NaturalLess(const std::string& a, const std::string& b);
+
+}  // namespace omni

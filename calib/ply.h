@@ -1,0 +1,30 @@
+#pragma once
+// PLY meshes and point clouds: read ascii and binary (little and big endian), write binary
+// little endian (float coordinates, uchar colours, int vertex indices).
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+#include <vector>
+
+namespace omni {
+
+struct TriangleMesh {
+  std::vector<Eigen::Vector3d> vertices;
+  std::vector<Eigen::Vector3i> triangles;  // counter-clockwise seen from the side it faces
+};
+
+struct PointCloud {
+  std::vector<Eigen::Vector3d> points;
+  std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;  // empty, or one per point
+};
+
+// Throws InputError naming the file on malformed input. Faces with more than three vertices
+// are split into fans.
+TriangleMesh ReadPlyMesh(const std::filesystem::path& path);
+PointCloud ReadPlyPoints(const std::filesystem::path& path);
+// Written atomically.
+void WritePlyMesh(const TriangleMesh& mesh, const std::filesystem::path& path);
+void WritePlyPoints(const PointCloud& cloud, const std::filesystem::path& path);
+
+}  // namespace omni

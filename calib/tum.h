@@ -1,0 +1,22 @@
+#pragma once
+// TUM trajectories: one pose per line, "timestamp tx ty tz qx qy qz qw", '#' comments.
+// Each pose is world_from_rig (the rig's position and orientation in the world).
+
+#include <filesystem>
+#include <vector>
+
+#include "calib/pose.h"
+
+namespace omni {
+
+struct StampedPose {
+  double timestamp = 0.0;
+  Rigid3d world_from_rig;
+};
+
+// Throws InputError naming the file and line on malformed input.
+std::vector<StampedPose> ReadTum(const std::filesystem::path& path);
+// Written atomically, with enough digits to round-trip to 1e-9.
+void WriteTum(const std::vector<StampedPose>& poses, const std::filesystem::path& path);
+
+}  // namespace omni

@@ -1,0 +1,295 @@
+#include "surface/delaunay.h"
+
+#include <algorithm>
+#include <cassert>
+#include <unordered_map>
+
+#include "surface/internal/cgal_delaunay.h"
+
+namespace omni {
+
+using internal::CellHandle;
+using internal::Point;
+using internal::VertexHandle;
+
+bool AllowedCounts(const ManifoldCounts& k) {
+  // Paper §3.1: the subtraction and addition tests accept exactly these (v, e, t) triplets.
+  static constexpr int kAllowed[5][3] = {{0, 0, 0}, {3, 3, 1}, {4, 5, 2}, {4, 6, 3}, {4, 6, 4}};
+  for (const auto& a : kAllowed) {
+    if (k.vertices == a[0] && k.edges == a[1] && k.triangles == a[2]) return true;
+  }
+  return false;
+}
+
+VertexHandle DelaunayMesh::Impl::AddVertex(VertexHandle v, int32_t point, bool steiner) {
+  if (v->info().index < 0) {
+    v->info().index = static_cast<int>(vertices.size());
+    v->info().point = point;
+    v->info().steiner = steiner;
+    vertices.push_back(v);
+  }
+  return v;
+}
+
+void DelaunayMesh::Impl::SetInO(CellHandle c, bool in_o) {
+  assert(!tri.is_infinite(c));
+  if (c->info().in_o == in_o) return;
+  for (int i = 0; i < 4; ++i) {
+    const bool other = c->neighbor(i)->info().in_o;
+    // The facet is in δO before the change iff other != old membership.
+    if (other == in_o) {
+      --num_triangles;
+    } else {
+      ++num_triangles;
+    }
+  }
+  c->info().in_o = in_o;
+  if (in_o) {
+    ++num_o;
+  } else {
+    --num_o;
+  }
+}
+
+bool DelaunayMesh::Impl::VertexOnSurface(VertexHandle v) const {
+  thread_local std::vector<CellHandle> star;
+  star.clear();
+  tri.incident_cells(v, std::back_inserter(star));
+  bool any_in = false, any_out = false;
+  for (const CellHandle& c : star) {
+    if (c->info().in_o) {
+      any_in = true;
+    } else {
+      any_out = true;
+    }
+    if (any_in && any_out) return true;
+  }
+  return false;
+}
+
+ManifoldCounts DelaunayMesh::Impl::Counts(CellHandle c) const {
+  ManifoldCounts k;
+  const bool in = c->info().in_o;
+  for (int i = 0; i < 4; ++i) {
+    if (c->neighbor(i)->info().in_o != in) ++k.triangles;
+  }
+  for (int i = 0; i < 4; ++i) {
+    if (VertexOnSurface(c->vertex(i))) ++k.vertices;
+  }
+  for (int i = 0; i < 4; ++i) {
+    for (int j = i + 1; j < 4; ++j) {
+      // Vertices of the edge must both be on the surface for the edge to be.
+      auto circ = tri.incident_cells(c, i, j);
+      auto done = circ;
+      bool any_in = false, any_out = false;
+      do {
+        if (circ->info().in_o) {
+          any_in = true;
+        } else {
+          any_out = true;
+        }
+        ++circ;
+      } while (circ != done && !(any_in && any_out));
+      if (any_in && any_out) ++k.edges;
+    }
+  }
+  return k;
+}
+
+bool DelaunayMesh::Impl::SingleCellTest(CellHandle c) const { return AllowedCounts(Counts(c)); }
+
+bool DelaunayMesh::Impl::GeneralTest(VertexHandle v) const {
+  thread_local std::vector<CellHandle> star;
+  star.clear();
+  tri.incident_cells(v, std::back_inserter(star));
+  // The v-opposite edges of the δO triangles around v, as pairs of vertex handles.
+  thread_local std::vector<std::pair<VertexHandle, VertexHandle>> edges;
+  edges.clear();
+  for (const CellHandle& c : star) {
+    if (!c->info().in_o) continue;
+    const int i = c->index(v);
+    for (int k = 0; k < 4; ++k) {
+      if (k == i || c->neighbor(k)->info().in_o) continue;
+      VertexHandle e[2];
+      int n = 0;
+      for (int m = 0; m < 4; ++m) {
+        if (m != i && m != k) e[n++] = c->vertex(m);
+      }
+      edges.emplace_back(e[0], e[1]);
+    }
+  }
+  if (edges.empty()) return true;
+  // One cycle: every vertex of the graph has degree two and a walk along the edges from any
+  // vertex comes back after using all of them.
+  thread_local std::vector<std::pair<VertexHandle, std::array<int, 2>>> nodes;  // vertex, edges
+  nodes.clear();
+  auto node_of = [&](VertexHandle w) -> std::array<int, 2>* {
+    for (auto& n : nodes) {
+      if (n.first == w) return &n.second;
+    }
+    nodes.push_back({w, {-1, -1}});
+    return &nodes.back().second;
+  };
+  for (int e = 0; e < static_cast<int>(edges.size()); ++e) {
+    for (VertexHandle w : {edges[e].first, edges[e].second}) {
+      std::array<int, 2>* slots = node_of(w);
+      if ((*slots)[0] < 0) {
+        (*slots)[0] = e;
+      } else if ((*slots)[1] < 0) {
+        (*slots)[1] = e;
+      } else {
+        return false;  // degree > 2
+      }
+    }
+  }
+  for (const auto& n : nodes) {
+    if (n.second[1] < 0) return false;  // degree 1
+  }
+  // Follow the cycle from edge 0.
+  size_t used = 0;
+  int e = 0;
+  VertexHandle at = edges[0].second;
+  do {
+    ++used;
+    const std::array<int, 2>* slots = node_of(at);
+    const int next = (*slots)[0] == e ? (*slots)[1] : (*slots)[0];
+    at = edges[next].first == at ? edges[next].second : edges[next].first;
+    e = next;
+  } while (e != 0 && used <= edges.size());
+  return used == edges.size();
+}
+
+CellHandle DelaunayMesh::Impl::CellOf(const CellKey& key) const {
+  VertexHandle v[4];
+  for (int i = 0; i < 4; ++i) {
+    v[i] = key[i] < 0 ? tri.infinite_vertex() : vertices.at(key[i]);
+  }
+  CellHandle c;
+  int i0, i1, i2, i3;
+  if (!tri.is_cell(v[0], v[1], v[2], v[3], c, i0, i1, i2, i3)) return CellHandle();
+  return c;
+}
+
+CellKey DelaunayMesh::Impl::KeyOf(CellHandle c) const {
+  CellKey key;
+  for (int i = 0; i < 4; ++i) {
+    key[i] = tri.is_infinite(c->vertex(i)) ? -1 : c->vertex(i)->info().index;
+  }
+  std::sort(key.begin(), key.end());
+  return key;
+}
+
+DelaunayMesh::DelaunayMesh() : impl_(std::make_unique<Impl>()) {}
+DelaunayMesh::~DelaunayMesh() = default;
+DelaunayMesh::DelaunayMesh(DelaunayMesh&&) noexcept = default;
+DelaunayMesh& DelaunayMesh::operator=(DelaunayMesh&&) noexcept = default;
+
+int DelaunayMesh::Insert(const Eigen::Vector3d& position, int point, bool steiner) {
+  CellHandle hint;
+  if (!impl_->vertices.empty()) hint = impl_->vertices.back()->cell();
+  const VertexHandle v = impl_->tri.insert(internal::ToCgal(position), hint);
+  return impl_->AddVertex(v, point, steiner)->info().index;
+}
+
+size_t DelaunayMesh::NumVertices() const { return impl_->vertices.size(); }
+
+Eigen::Vector3d DelaunayMesh::Position(int vertex) const {
+  return internal::ToEigen(impl_->vertices.at(vertex)->point());
+}
+
+bool DelaunayMesh::IsValid() const { return impl_->tri.is_valid(false); }
+
+TriangulationCounts DelaunayMesh::Counts() const {
+  const auto& t = impl_->tri;
+  TriangulationCounts k;
+  k.vertices = t.number_of_vertices();
+  k.edges = t.number_of_edges();
+  k.facets = t.number_of_facets();
+  k.cells = t.number_of_cells();
+  k.finite_edges = t.number_of_finite_edges();
+  k.finite_facets = t.number_of_finite_facets();
+  k.finite_cells = t.number_of_finite_cells();
+  return k;
+}
+
+std::vector<CellKey> DelaunayMesh::FiniteCells() const {
+  std::vector<CellKey> cells;
+  for (auto c : impl_->tri.finite_cell_handles()) cells.push_back(impl_->KeyOf(c));
+  return cells;
+}
+
+std::vector<CellKey> DelaunayMesh::Walk(int from, const Eigen::Vector3d& target) const {
+  std::vector<CellKey> cells;
+  impl_->Walk(impl_->vertices.at(from), internal::ToCgal(target),
+              [&](CellHandle c) { cells.push_back(impl_->KeyOf(c)); });
+  return cells;
+}
+
+void DelaunayMesh::TraceRay(int from, const Eigen::Vector3d& target) {
+  impl_->Walk(impl_->vertices.at(from), internal::ToCgal(target), [&](CellHandle c) {
+    if (c->info().counter++ == 0) ++impl_->num_f;
+  });
+}
+
+int DelaunayMesh::Counter(const CellKey& cell) const {
+  const CellHandle c = impl_->CellOf(cell);
+  assert(c != CellHandle());
+  return static_cast<int>(c->info().counter);
+}
+
+void DelaunayMesh::SetInO(const CellKey& cell, bool in_o) {
+  const CellHandle c = impl_->CellOf(cell);
+  assert(c != CellHandle() && !impl_->tri.is_infinite(c));
+  impl_->SetInO(c, in_o);
+}
+
+bool DelaunayMesh::InO(const CellKey& cell) const {
+  const CellHandle c = impl_->CellOf(cell);
+  return c != CellHandle() && c->info().in_o;
+}
+
+ManifoldCounts DelaunayMesh::CountsInSurface(const CellKey& cell) const {
+  return impl_->Counts(impl_->CellOf(cell));
+}
+
+bool DelaunayMesh::SingleCellTest(const CellKey& cell) const {
+  return impl_->SingleCellTest(impl_->CellOf(cell));
+}
+
+bool DelaunayMesh::GeneralTest(int vertex) const {
+  return impl_->GeneralTest(impl_->vertices.at(vertex));
+}
+
+size_t DelaunayMesh::NumInO() const { return impl_->num_o; }
+size_t DelaunayMesh::NumSurfaceTriangles() const { return impl_->num_triangles; }
+
+TriangleMesh DelaunayMesh::ExtractSurface() const {
+  TriangleMesh mesh;
+  std::vector<int> compact(impl_->vertices.size(), -1);
+  auto index_of = [&](VertexHandle v) {
+    int& k = compact[v->info().index];
+    if (k < 0) {
+      k = static_cast<int>(mesh.vertices.size());
+      mesh.vertices.push_back(internal::ToEigen(v->point()));
+    }
+    return k;
+  };
+  for (auto c : impl_->tri.finite_cell_handles()) {
+    if (!c->info().in_o) continue;
+    for (int k = 0; k < 4; ++k) {
+      if (c->neighbor(k)->info().in_o) continue;
+      VertexHandle a = c->vertex((k + 1) & 3), b = c->vertex((k + 2) & 3),
+                   d = c->vertex((k + 3) & 3);
+      // Counter-clockwise seen from O: the cell's fourth vertex (inside O's side) on the
+      // positive side of the oriented plane (a, b, d).
+      if (CGAL::orientation(a->point(), b->point(), d->point(), c->vertex(k)->point()) ==
+          CGAL::NEGATIVE) {
+        std::swap(b, d);
+      }
+      mesh.triangles.emplace_back(index_of(a), index_of(b), index_of(d));
+    }
+  }
+  return mesh;
+}
+
+}  // namespace omni

@@ -1,0 +1,168 @@
+#pragma once
+// INTERNAL to surface/*.cpp: the CGAL types behind DelaunayMesh. Never include this from a
+// public header (DESIGN.md §2: CGAL types stay out of public headers).
+
+#include <CGAL/Delaunay_triangulation_3.h>
+#include <CGAL/Delaunay_triangulation_cell_base_3.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_cell_base_with_info_3.h>
+#include <CGAL/Triangulation_vertex_base_with_info_3.h>
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "surface/delaunay.h"
+
+namespace omni::internal {
+
+struct VertexInfo {
+  int index = -1;        // DelaunayMesh vertex index (position in Impl::vertices)
+  int32_t point = -1;    // caller's point index; -1 for Steiner vertices
+  bool steiner = false;  // a vertex of the Steiner grid (paper §3.3)
+};
+
+struct CellInfo {
+  uint32_t counter = 0;  // ray intersection counter (paper §4.4); > 0 means the cell is in F
+  uint32_t date = 0;     // creation date: the stamp of the keyframe that created it (§4.3)
+  uint32_t e_stamp = 0;  // equal to the current stamp when the cell is in E (§4.1)
+  bool in_o = false;     // the cell is in O (free space carved so far, O ⊆ F)
+  bool queued = false;   // scratch flag of the priority-queue passes
+};
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Point = Kernel::Point_3;
+using Vb = CGAL::Triangulation_vertex_base_with_info_3<VertexInfo, Kernel>;
+using Cb0 = CGAL::Delaunay_triangulation_cell_base_3<Kernel>;
+using Cb = CGAL::Triangulation_cell_base_with_info_3<CellInfo, Kernel, Cb0>;
+using Tds = CGAL::Triangulation_data_structure_3<Vb, Cb>;
+using Delaunay = CGAL::Delaunay_triangulation_3<Kernel, Tds>;
+using VertexHandle = Delaunay::Vertex_handle;
+using CellHandle = Delaunay::Cell_handle;
+
+inline Point ToCgal(const Eigen::Vector3d& p) { return Point(p.x(), p.y(), p.z()); }
+inline Eigen::Vector3d ToEigen(const Point& p) { return Eigen::Vector3d(p.x(), p.y(), p.z()); }
+
+}  // namespace omni::internal
+
+namespace omni {
+
+// The state behind DelaunayMesh; surface/*.cpp that need CGAL reach it through
+// DelaunayMesh::impl().
+struct DelaunayMesh::Impl {
+  internal::Delaunay tri;
+  std::vector<internal::VertexHandle> vertices;  // by DelaunayMesh vertex index
+  size_t num_o = 0;          // cells in O
+  size_t num_f = 0;          // finite cells with counter > 0
+  size_t num_triangles = 0;  // triangles of δO
+
+  internal::VertexHandle AddVertex(internal::VertexHandle v, int32_t point, bool steiner);
+
+  // O bookkeeping with the counts above kept up to date. Never called on an infinite cell.
+  void SetInO(internal::CellHandle c, bool in_o);
+  bool InO(internal::CellHandle c) const { return c->info().in_o; }
+
+  // Number of (vertices, edges, triangles) of cell c in |δO| (paper §3.1).
+  ManifoldCounts Counts(internal::CellHandle c) const;
+  // The subtraction test (c in O) or addition test (c not in O): Counts(c) is allowed.
+  bool SingleCellTest(internal::CellHandle c) const;
+  // The general test at v: the v-opposite edges of the δO triangles around v form one cycle
+  // (or there is no such triangle).
+  bool GeneralTest(internal::VertexHandle v) const;
+  bool VertexOnSurface(internal::VertexHandle v) const;
+
+  // The walk of a ray from vertex `from` to `target` (paper §4.4): calls visit(cell) on every
+  // cell crossed, in order. Stops at the cell containing target or at an infinite cell (which
+  // is not visited). Thread-safe on a triangulation that is not being modified.
+  template <typename Visit>
+  void Walk(internal::VertexHandle from, const internal::Point& target, Visit&& visit) const;
+
+  internal::CellHandle CellOf(const CellKey& key) const;
+  CellKey KeyOf(internal::CellHandle c) const;
+};
+
+bool AllowedCounts(const ManifoldCounts& counts);
+
+template <typename Visit>
+void DelaunayMesh::Impl::Walk(internal::VertexHandle from, const internal::Point& target,
+                              Visit&& visit) const {
+  using internal::CellHandle;
+  const internal::Point& p = from->point();
+  if (p == target) return;
+  // Start: an incident cell of `from` whose cone at `from` the segment enters, i.e. the target
+  // is on the inner side of the three facets through `from`.
+  // The star of `from` by a search over neighbours (CGAL's incident_cells marks cells of the
+  // shared data structure, so it is not safe in parallel walks).
+  thread_local std::vector<CellHandle> star;
+  star.clear();
+  star.push_back(from->cell());
+  for (size_t s = 0; s < star.size(); ++s) {
+    const CellHandle c = star[s];
+    for (int k = 0; k < 4; ++k) {
+      if (c->vertex(k) == from) continue;
+      const CellHandle n = c->neighbor(k);
+      if (std::find(star.begin(), star.end(), n) == star.end()) star.push_back(n);
+    }
+  }
+  CellHandle cell;
+  int entry = -1;  // index of the facet we entered through (-1: the start vertex's cell)
+  for (const CellHandle& c : star) {
+    if (tri.is_infinite(c)) continue;
+    const int i = c->index(from);
+    bool enters = true;
+    for (int j = 0; j < 4 && enters; ++j) {
+      if (j == i) continue;
+      std::array<const internal::Point*, 4> q = {&c->vertex(0)->point(), &c->vertex(1)->point(),
+                                                  &c->vertex(2)->point(), &c->vertex(3)->point()};
+      q[j] = &target;
+      if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) == CGAL::NEGATIVE) enters = false;
+    }
+    if (enters) {
+      cell = c;
+      entry = i;  // the exit is the facet opposite `from`
+      break;
+    }
+  }
+  if (cell == CellHandle()) return;  // only infinite cells ahead: the target is off the hull
+  bool first = true;
+  // A guard against degenerate cycling: a walk never visits more cells than T has.
+  for (size_t steps = 0; steps <= tri.number_of_cells(); ++steps) {
+    if (tri.is_infinite(cell)) return;
+    visit(cell);
+    // Facets with the target strictly beyond their plane.
+    std::array<const internal::Point*, 4> v = {&cell->vertex(0)->point(), &cell->vertex(1)->point(),
+                                                &cell->vertex(2)->point(), &cell->vertex(3)->point()};
+    int exit = -1;
+    if (first) {
+      const int i = entry;
+      std::array<const internal::Point*, 4> q = v;
+      q[i] = &target;
+      if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) == CGAL::NEGATIVE) exit = i;
+      first = false;
+    } else {
+      for (int k = 0; k < 4 && exit < 0; ++k) {
+        if (k == entry) continue;
+        std::array<const internal::Point*, 4> q = v;
+        q[k] = &target;
+        if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) != CGAL::NEGATIVE) continue;
+        // The line p→target crosses triangle k: p and target on opposite sides of the three
+        // planes (p, target, edge).
+        const int a = (k + 1) & 3, b = (k + 2) & 3, d = (k + 3) & 3;
+        const auto o1 = CGAL::orientation(p, target, *v[a], *v[b]);
+        const auto o2 = CGAL::orientation(p, target, *v[b], *v[d]);
+        const auto o3 = CGAL::orientation(p, target, *v[d], *v[a]);
+        const bool has_pos = o1 == CGAL::POSITIVE || o2 == CGAL::POSITIVE || o3 == CGAL::POSITIVE;
+        const bool has_neg = o1 == CGAL::NEGATIVE || o2 == CGAL::NEGATIVE || o3 == CGAL::NEGATIVE;
+        if (!(has_pos && has_neg)) exit = k;
+      }
+    }
+    if (exit < 0) return;  // the target is inside this cell
+    const CellHandle next = cell->neighbor(exit);
+    entry = next->index(cell);
+    cell = next;
+  }
+}
+
+}  // namespace omni

@@ -1,0 +1,234 @@
+#include "calib/drive.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <opencv2/imgcodecs.hpp>
+
+#include "calib/error.h"
+#include "calib/rig_io.h"
+#include "tests/calib/io_temp_dir.h"
+
+namespace omni {
+namespace {
+
+using omni::testing::TempDir;
+using omni::testing::WriteBytes;
+
+constexpr int kWidth = 32;
+constexpr int kHeight = 24;
+
+Rig TwoCameraRig() {
+  Rig rig;
+  rig.name = "two";
+  for (const char* name : {"left", "right"}) {
+    Camera camera;
+    camera.name = name;
+    camera.width = kWidth;
+    camera.height = kHeight;
+    camera.model = CameraModel::kPinhole;
+    camera.params = {20.0, 20.0, 15.5, 11.5};
+    rig.cameras.push_back(camera);
+  }
+  return rig;
+}
+
+// A grey image whose pixels encode the frame, so that the loaded image can be recognised.
+cv::Mat FrameImage(int value, int width = kWidth, int height = kHeight) {
+  return cv::Mat(height, width, CV_8UC1, cv::Scalar(value));
+}
+
+void WriteImage(const std::filesystem::path& path, const cv::Mat& image) {
+  ASSERT_TRUE(cv::imwrite(path.string(), image)) << path;
+}
+
+// drive/rig.json and drive/images/<camera>/<frame><extension> for the given files.
+std::filesystem::path MakeDrive(const TempDir& dir, const std::vector<std::string>& left_files,
+                                const std::vector<std::string>& right_files) {
+  const std::filesystem::path drive = dir / "drive";
+  std::filesystem::create_directories(drive / "images" / "left");
+  std::filesystem::create_directories(drive / "images" / "right");
+  WriteRigJson(TwoCameraRig(), drive / "rig.json");
+  int value = 1;
+  for (const std::string& file : left_files) {
+    WriteImage(drive / "images" / "left" / file, FrameImage(value++));
+  }
+  for (const std::string& file : right_files) {
+    WriteImage(drive / "images" / "right" / file, FrameImage(value++));
+  }
+  return drive;
+}
+
+std::string OpenError(const std::filesystem::path& folder, const DriveOptions& options = {}) {
+  try {
+    Drive::Open(folder, options);
+  } catch (const InputError& error) {
+    return error.what();
+  }
+  ADD_FAILURE() << "no InputError for " << folder;
+  return "";
+}
+
+std::string LoadError(const Drive& drive, size_t frame, size_t camera) {
+  try {
+    drive.LoadGray(frame, camera);
+  } catch (const InputError& error) {
+    return error.what();
+  }
+  ADD_FAILURE() << "no InputError loading frame " << frame << " camera " << camera;
+  return "";
+}
+
+TEST(NaturalLess, DigitRunsCompareByValue) {
+  EXPECT_TRUE(NaturalLess("2", "10"));
+  EXPECT_FALSE(NaturalLess("10", "2"));
+  EXPECT_TRUE(NaturalLess("10", "a2"));
+  EXPECT_TRUE(NaturalLess("a2", "a10"));
+  EXPECT_TRUE(NaturalLess("a", "a1"));
+  EXPECT_TRUE(NaturalLess("frame_9_b", "frame_10_a"));
+  EXPECT_FALSE(NaturalLess("x7", "x7"));
+  // Equal values with leading zeros still have a strict order.
+  EXPECT_NE(NaturalLess("01", "1"), NaturalLess("1", "01"));
+  std::vector<std::string> names = {"img10", "img2", "img1", "img02x", "img100", "img9"};
+  std::sort(names.begin(), names.end(), NaturalLess);
+  const std::vector<std::string> expected = {"img1", "img2", "img02x", "img9", "img10", "img100"};
+  EXPECT_EQ(names, expected);
+}
+
+TEST(Drive, ListsCompleteFramesInNaturalOrder) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {"f10.png", "f2.png", "f1.png", "f9.jpg", "f3.PNG"},
+                                {"f9.png", "f1.png", "f10.jpg", "f2.png", "f3.png"});
+  WriteBytes(folder / "images" / "left" / "notes.txt", "not an image");
+  const Drive drive = Drive::Open(folder);
+  const std::vector<std::string> expected = {"f1", "f2", "f3", "f9", "f10"};
+  EXPECT_EQ(drive.frame_names(), expected);
+  EXPECT_EQ(drive.NumFrames(), 5u);
+  EXPECT_TRUE(drive.incomplete_frames().empty());
+  EXPECT_EQ(drive.rig().NumCameras(), 2u);
+  EXPECT_EQ(drive.ImagePath(2, 0), folder / "images" / "left" / "f3.PNG");
+  EXPECT_EQ(drive.ImagePath(4, 1), folder / "images" / "right" / "f10.jpg");
+  EXPECT_EQ(drive.GroundTruthPosesPath(), folder / "gt" / "poses.tum");
+  // Images come back as 8-bit grey of the written content (left f2 was written with value 2).
+  const cv::Mat image = drive.LoadGray(1, 0);
+  EXPECT_EQ(image.type(), CV_8UC1);
+  EXPECT_EQ(image.cols, kWidth);
+  EXPECT_EQ(image.rows, kHeight);
+  EXPECT_EQ(image.at<uint8_t>(5, 5), 2);
+}
+
+TEST(Drive, IncompleteFramesAreReportedNotUsed) {
+  TempDir dir;
+  const auto folder =
+      MakeDrive(dir, {"1.png", "2.png", "3.png", "5.png"}, {"1.png", "3.png", "4.png", "5.png"});
+  const Drive drive = Drive::Open(folder);
+  const std::vector<std::string> expected = {"1", "3", "5"};
+  EXPECT_EQ(drive.frame_names(), expected);
+  ASSERT_EQ(drive.incomplete_frames().size(), 2u);
+  EXPECT_EQ(drive.incomplete_frames()[0].frame_name, "2");
+  EXPECT_EQ(drive.incomplete_frames()[0].missing_cameras, std::vector<std::string>{"right"});
+  EXPECT_EQ(drive.incomplete_frames()[1].frame_name, "4");
+  EXPECT_EQ(drive.incomplete_frames()[1].missing_cameras, std::vector<std::string>{"left"});
+}
+
+TEST(Drive, MissingCameraFolder) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {"1.png"}, {"1.png"});
+  std::filesystem::remove_all(folder / "images" / "right");
+  EXPECT_EQ(OpenError(folder), (folder / "images" / "right").string() +
+                                   ": missing camera folder (rig.json has a camera \"right\")");
+}
+
+TEST(Drive, EmptyCameraFolder) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {"1.png"}, {});
+  WriteBytes(folder / "images" / "right" / "readme.txt", "no images here");
+  const std::string message = OpenError(folder);
+  EXPECT_EQ(message.rfind((folder / "images" / "right").string() + ": no images", 0), 0u)
+      << message;
+}
+
+TEST(Drive, TwoFilesForOneFrameInACamera) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {"1.png", "1.jpg"}, {"1.png"});
+  EXPECT_EQ(OpenError(folder), (folder / "images" / "left").string() +
+                                   ": two images for frame \"1\": 1.jpg and 1.png");
+}
+
+TEST(Drive, MissingPieces) {
+  TempDir dir;
+  EXPECT_EQ(OpenError(dir / "nothing"), (dir / "nothing").string() + ": no such folder");
+  const auto folder = MakeDrive(dir, {"1.png"}, {"1.png"});
+  std::filesystem::rename(folder / "rig.json", folder / "rig.bak");
+  EXPECT_EQ(OpenError(folder), (folder / "rig.json").string() + ": cannot open");
+  std::filesystem::rename(folder / "rig.bak", folder / "rig.json");
+  std::filesystem::rename(folder / "images", folder / "pictures");
+  const std::string message = OpenError(folder);
+  EXPECT_EQ(message.rfind((folder / "images").string() + ": missing folder", 0), 0u) << message;
+}
+
+TEST(Drive, MinFrames) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {"1.png", "2.png", "3.png", "4.png", "5.png"},
+                                {"1.png", "2.png", "3.png", "4.png"});
+  DriveOptions options;
+  options.min_frames = 5;
+  EXPECT_EQ(OpenError(folder, options),
+            folder.string() + ": drive too short: 4 complete frames, at least 5 needed");
+  options.min_frames = 4;
+  EXPECT_EQ(Drive::Open(folder, options).NumFrames(), 4u);
+}
+
+TEST(Drive, OptionsCheck) {
+  DriveOptions options;
+  EXPECT_EQ(options.Check(), "");
+  options.image_extensions = {"png"};
+  EXPECT_NE(options.Check(), "");
+  options = DriveOptions();
+  options.min_frames = 0;
+  EXPECT_NE(options.Check(), "");
+}
+
+TEST(Drive, WrongImageSize) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {"1.png"}, {});
+  WriteImage(folder / "images" / "right" / "1.png", FrameImage(9, 40, 24));
+  const Drive drive = Drive::Open(folder);
+  EXPECT_EQ(LoadError(drive, 0, 1), (folder / "images" / "right" / "1.png").string() +
+                                        ": image is 40x24, rig.json gives camera right 32x24");
+  EXPECT_NO_THROW(drive.LoadGray(0, 0));
+}
+
+TEST(Drive, CorruptOrVanishedImage) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {"1.png", "2.png"}, {"1.png", "2.png"});
+  const auto corrupt = folder / "images" / "left" / "2.png";
+  WriteBytes(corrupt, "\x89PNG garbage garbage garbage garbage");
+  const Drive drive = Drive::Open(folder);
+  EXPECT_EQ(LoadError(drive, 1, 0), corrupt.string() + ": cannot read image (missing or corrupt)");
+  const auto vanished = folder / "images" / "right" / "1.png";
+  std::filesystem::remove(vanished);
+  EXPECT_EQ(LoadError(drive, 0, 1), vanished.string() + ": cannot read image (missing or corrupt)");
+}
+
+TEST(Drive, ColourAndSixteenBitImagesLoadAsEightBitGrey) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {}, {});
+  // Pure green in BGR: grey = 0.587 * 255 = 149.7.
+  WriteImage(folder / "images" / "left" / "1.png",
+             cv::Mat(kHeight, kWidth, CV_8UC3, cv::Scalar(0, 255, 0)));
+  WriteImage(folder / "images" / "right" / "1.png",
+             cv::Mat(kHeight, kWidth, CV_16UC1, cv::Scalar(100 * 256 + 37)));
+  const Drive drive = Drive::Open(folder);
+  const cv::Mat colour = drive.LoadGray(0, 0);
+  EXPECT_EQ(colour.type(), CV_8UC1);
+  EXPECT_EQ(colour.size(), cv::Size(kWidth, kHeight));
+  EXPECT_NEAR(colour.at<uint8_t>(3, 4), 150, 1);
+  const cv::Mat deep = drive.LoadGray(0, 1);
+  EXPECT_EQ(deep.type(), CV_8UC1);
+  EXPECT_EQ(deep.size(), cv::Size(kWidth, kHeight));
+  EXPECT_NEAR(deep.at<uint8_t>(3, 4), 100, 1);
+}
+
+}  // namespace
+}  // namespace omni

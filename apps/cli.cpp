@@ -5,6 +5,8 @@
 
 #include <cstdio>
 #include <exception>
+#include <string>
+#include <vector>
 
 #include "apps/commands.h"
 #include "calib/error.h"
@@ -45,8 +47,15 @@ int RunCommandLine(int argc, char** argv) {
   } catch (const CLI::Success& success) {
     return app.exit(success);  // --help, --version
   } catch (const CLI::ParseError& error) {
-    // One line, like every other bad input (CLI11's own exit() prints two).
-    std::fprintf(stderr, "omnisculpt: error: %s (see --help)\n", error.what());
+    // One line, like every other bad input (CLI11's own exit() prints two). CLI11 checks for a
+    // missing subcommand before it checks for unknown arguments: name those first.
+    std::string message = error.what();
+    const std::vector<std::string> unknown = app.remaining();
+    if (!unknown.empty()) {
+      message = "unknown argument" + std::string(unknown.size() > 1 ? "s" : "") + ":";
+      for (const std::string& argument : unknown) message += " " + argument;
+    }
+    std::fprintf(stderr, "omnisculpt: error: %s (see --help)\n", message.c_str());
     return 2;
   } catch (const InputError& error) {
     std::fprintf(stderr, "omnisculpt: error: %s\n", error.what());

@@ -96,7 +96,39 @@ ManifoldCounts DelaunayMesh::Impl::Counts(CellHandle c) const {
   return k;
 }
 
-bool DelaunayMesh::Impl::SingleCellTest(CellHandle c) const { return AllowedCounts(Counts(c)); }
+bool DelaunayMesh::Impl::SingleCellTest(CellHandle c) const {
+  // AllowedCounts(Counts(c)) without counting everything: the number t of facets of c in δO
+  // fixes the only allowed triplet, and the facets already put their vertices and edges in
+  // |δO|, so at most one more element needs a look.
+  const bool in = c->info().in_o;
+  int t = 0;
+  int on[4];  // the facets of c in δO
+  for (int i = 0; i < 4; ++i) {
+    if (c->neighbor(i)->info().in_o != in) on[t++] = i;
+  }
+  switch (t) {
+    case 0:  // (0,0,0): no vertex of c on the surface
+      for (int i = 0; i < 4; ++i) {
+        if (VertexOnSurface(c->vertex(i))) return false;
+      }
+      return true;
+    case 1:  // (3,3,1): the vertex opposite the facet is off the surface
+      return !VertexOnSurface(c->vertex(on[0]));
+    case 2: {  // (4,5,2): the edge joining the vertices opposite the two facets (the only edge
+               // of c in neither facet) is off the surface
+      auto circ = tri.incident_cells(c, on[0], on[1]);
+      auto done = circ;
+      bool any_in = false, any_out = false;
+      do {
+        (circ->info().in_o ? any_in : any_out) = true;
+        ++circ;
+      } while (circ != done && !(any_in && any_out));
+      return !(any_in && any_out);
+    }
+    default:  // (4,6,3) and (4,6,4): always allowed
+      return true;
+  }
+}
 
 bool DelaunayMesh::Impl::GeneralTest(VertexHandle v) const {
   thread_local std::vector<CellHandle> star;
@@ -220,13 +252,13 @@ std::vector<CellKey> DelaunayMesh::FiniteCells() const {
 
 std::vector<CellKey> DelaunayMesh::Walk(int from, const Eigen::Vector3d& target) const {
   std::vector<CellKey> cells;
-  impl_->Walk(impl_->vertices.at(from), internal::ToCgal(target),
+  impl_->Walk(impl_->vertices.at(from), internal::ToCgal(target), 2.0,
               [&](CellHandle c) { cells.push_back(impl_->KeyOf(c)); });
   return cells;
 }
 
 void DelaunayMesh::TraceRay(int from, const Eigen::Vector3d& target) {
-  impl_->Walk(impl_->vertices.at(from), internal::ToCgal(target), [&](CellHandle c) {
+  impl_->Walk(impl_->vertices.at(from), internal::ToCgal(target), 2.0, [&](CellHandle c) {
     if (c->info().counter++ == 0) ++impl_->num_f;
   });
 }

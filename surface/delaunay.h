@@ -28,8 +28,8 @@ struct ManifoldCounts {
 };
 
 struct TriangulationCounts {
-  size_t vertices = 0;  // finite vertices
-  size_t edges = 0, facets = 0, cells = 0;                      // all, infinite ones included
+  size_t vertices = 0;                      // finite vertices
+  size_t edges = 0, facets = 0, cells = 0;  // all, infinite ones included
   size_t finite_edges = 0, finite_facets = 0, finite_cells = 0;
 };
 

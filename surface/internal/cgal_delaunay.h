@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "surface/delaunay.h"
@@ -25,11 +26,12 @@ struct VertexInfo {
 };
 
 struct CellInfo {
-  uint32_t counter = 0;  // ray intersection counter (paper §4.4); > 0 means the cell is in F
-  uint32_t date = 0;     // creation date: the stamp of the keyframe that created it (§4.3)
-  uint32_t e_stamp = 0;  // equal to the current stamp when the cell is in E (§4.1)
-  bool in_o = false;     // the cell is in O (free space carved so far, O ⊆ F)
-  bool queued = false;   // scratch flag of the priority-queue passes
+  uint32_t counter = 0;    // ray intersection counter (paper §4.4); > 0 means the cell is in F
+  uint32_t date = 0;       // creation date: the stamp of the keyframe that created it (§4.3)
+  uint32_t e_stamp = 0;    // equal to the current stamp when the cell is in E (§4.1)
+  uint32_t ray_stamp = 0;  // equal to the current stamp when a new ray crossed the cell
+  bool in_o = false;       // the cell is in O (free space carved so far, O ⊆ F)
+  bool queued = false;     // scratch flag of the priority-queue passes
 };
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
@@ -54,9 +56,9 @@ namespace omni {
 struct DelaunayMesh::Impl {
   internal::Delaunay tri;
   std::vector<internal::VertexHandle> vertices;  // by DelaunayMesh vertex index
-  size_t num_o = 0;          // cells in O
-  size_t num_f = 0;          // finite cells with counter > 0
-  size_t num_triangles = 0;  // triangles of δO
+  size_t num_o = 0;                              // cells in O
+  size_t num_f = 0;                              // finite cells with counter > 0
+  size_t num_triangles = 0;                      // triangles of δO
 
   internal::VertexHandle AddVertex(internal::VertexHandle v, int32_t point, bool steiner);
 
@@ -75,9 +77,12 @@ struct DelaunayMesh::Impl {
 
   // The walk of a ray from vertex `from` to `target` (paper §4.4): calls visit(cell) on every
   // cell crossed, in order. Stops at the cell containing target or at an infinite cell (which
-  // is not visited). Thread-safe on a triangulation that is not being modified.
+  // is not visited), or after a cell lying wholly beyond the parameter `stop` along
+  // from→target (every vertex projects beyond it). Thread-safe on a triangulation that is not
+  // being modified.
   template <typename Visit>
-  void Walk(internal::VertexHandle from, const internal::Point& target, Visit&& visit) const;
+  void Walk(internal::VertexHandle from, const internal::Point& target, double stop,
+            Visit&& visit) const;
 
   internal::CellHandle CellOf(const CellKey& key) const;
   CellKey KeyOf(internal::CellHandle c) const;
@@ -87,7 +92,7 @@ bool AllowedCounts(const ManifoldCounts& counts);
 
 template <typename Visit>
 void DelaunayMesh::Impl::Walk(internal::VertexHandle from, const internal::Point& target,
-                              Visit&& visit) const {
+                              double stop, Visit&& visit) const {
   using internal::CellHandle;
   const internal::Point& p = from->point();
   if (p == target) return;
@@ -115,7 +120,7 @@ void DelaunayMesh::Impl::Walk(internal::VertexHandle from, const internal::Point
     for (int j = 0; j < 4 && enters; ++j) {
       if (j == i) continue;
       std::array<const internal::Point*, 4> q = {&c->vertex(0)->point(), &c->vertex(1)->point(),
-                                                  &c->vertex(2)->point(), &c->vertex(3)->point()};
+                                                 &c->vertex(2)->point(), &c->vertex(3)->point()};
       q[j] = &target;
       if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) == CGAL::NEGATIVE) enters = false;
     }
@@ -127,13 +132,27 @@ void DelaunayMesh::Impl::Walk(internal::VertexHandle from, const internal::Point
   }
   if (cell == CellHandle()) return;  // only infinite cells ahead: the target is off the hull
   bool first = true;
+  // Direction scaled so that the projection of a point is its parameter along from→target.
+  double dir[3] = {target.x() - p.x(), target.y() - p.y(), target.z() - p.z()};
+  const double norm2 = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];
+  for (double& x : dir) x /= norm2;
   // A guard against degenerate cycling: a walk never visits more cells than T has.
   for (size_t steps = 0; steps <= tri.number_of_cells(); ++steps) {
     if (tri.is_infinite(cell)) return;
     visit(cell);
+    if (stop < 1.0) {
+      double nearest = std::numeric_limits<double>::infinity();
+      for (int i = 0; i < 4; ++i) {
+        const internal::Point& w = cell->vertex(i)->point();
+        nearest = std::min(nearest, (w.x() - p.x()) * dir[0] + (w.y() - p.y()) * dir[1] +
+                                        (w.z() - p.z()) * dir[2]);
+      }
+      if (nearest > stop) return;
+    }
     // Facets with the target strictly beyond their plane.
     std::array<const internal::Point*, 4> v = {&cell->vertex(0)->point(), &cell->vertex(1)->point(),
-                                                &cell->vertex(2)->point(), &cell->vertex(3)->point()};
+                                               &cell->vertex(2)->point(),
+                                               &cell->vertex(3)->point()};
     int exit = -1;
     if (first) {
       const int i = entry;
@@ -142,6 +161,32 @@ void DelaunayMesh::Impl::Walk(internal::VertexHandle from, const internal::Point
       if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) == CGAL::NEGATIVE) exit = i;
       first = false;
     } else {
+      // Seen along the line p→target, the line is a point L inside the entry triangle
+      // (a, b, c); the exit is the face through the opposite vertex d whose projection holds L,
+      // told apart by the side of L with respect to the planes (p, target, d, x), x = a, b, c
+      // (the straight walk of Devillers, Pion and Teillaud): three predicates per cell.
+      const int ia = (entry + 1) & 3, ib = (entry + 2) & 3, ic = (entry + 3) & 3;
+      const internal::Point& d = *v[entry];
+      const auto side = CGAL::orientation(p, target, *v[ia], *v[ib]);  // of L in (a, b, c)
+      const auto ta = CGAL::orientation(p, target, d, *v[ia]);
+      int candidate = -1;
+      if (side != CGAL::ZERO && ta != CGAL::ZERO) {
+        if (ta == side) {
+          const auto tb = CGAL::orientation(p, target, d, *v[ib]);
+          if (tb != CGAL::ZERO) candidate = tb == side ? ia : ic;  // face (b,c,d) or (a,b,d)
+        } else {
+          const auto tc = CGAL::orientation(p, target, d, *v[ic]);
+          if (tc != CGAL::ZERO) candidate = tc == side ? ib : ia;  // face (c,a,d) or (b,c,d)
+        }
+      }
+      if (candidate >= 0) {
+        std::array<const internal::Point*, 4> q = v;
+        q[candidate] = &target;
+        // The target before the exit face: it is in this cell.
+        if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) == CGAL::NEGATIVE) exit = candidate;
+        if (exit < 0) return;
+      }
+      // Degenerate (a zero predicate): test every face.
       for (int k = 0; k < 4 && exit < 0; ++k) {
         if (k == entry) continue;
         std::array<const internal::Point*, 4> q = v;

@@ -1,0 +1,48 @@
+#pragma once
+// A simulated perfect SfM for the surface module (issue 6): keyframes along a ground-truth
+// trajectory and points sampled on the visible ground-truth surface, each with its rays to the
+// earlier keyframes that see it unoccluded (paper §3.3: a point of P_t is observed by keyframes
+// t' ≤ t only). Central rig: every ray starts at the keyframe centre.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "calib/ply.h"
+#include "surface/sculptor.h"
+
+namespace omni {
+
+struct GtKeyframeOptions {
+  double keyframe_spacing = 1.9;  // metres between keyframe centres (paper §5.1: 2.5 km, 1306 kf)
+  int points_per_keyframe = 370;  // new points per keyframe (paper §5.1: 483k points / 1306 kf)
+  // Largest point–centre distance, in units of keyframe_spacing (paper §5.1: 15 s).
+  double max_distance_factor = 15.0;
+  int max_observing_keyframes = 12;  // earlier keyframes tried for the rays of a point
+  int min_rays = 2;                  // points seen by fewer keyframes are not reconstructed
+  double point_noise = 0.0;          // std. dev. of a Gaussian added to points, metres
+  int max_keyframes = 0;             // 0: the whole trajectory
+  uint64_t seed = 1;
+
+  std::string Check() const;
+};
+
+// Keyframe centres every keyframe_spacing metres along the centres of a trajectory.
+std::vector<Eigen::Vector3d> SelectKeyframeCentres(const std::vector<Eigen::Vector3d>& centres,
+                                                   double spacing);
+
+// The keyframe stream of DESIGN.md §4 over `mesh` seen from `keyframe_centres` (Embree).
+std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
+                                             const std::vector<Eigen::Vector3d>& keyframe_centres,
+                                             const GtKeyframeOptions& options);
+
+// Reads DRIVE/rig.json, DRIVE/gt/poses.tum and DRIVE/gt/mesh.ply (InputError when missing or
+// malformed) and returns the stream; the centre of a frame is world_from_rig applied to the
+// rig's central centre.
+std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
+                                             const GtKeyframeOptions& options,
+                                             TriangleMesh* gt_mesh = nullptr);
+
+}  // namespace omni

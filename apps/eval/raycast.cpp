@@ -13,9 +13,7 @@
 #include "calib/error.h"
 
 namespace omni {
-namespace {
 
-// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
 Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
                                        const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
   const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
@@ -43,6 +41,8 @@ Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Ve
   const double v = vb / denominator, w = vc / denominator;
   return a + v * ab + w * ac;
 }
+
+namespace {
 
 struct ClosestQuery {
   const std::vector<Eigen::Vector3d>* vertices;

@@ -25,6 +25,11 @@ struct Ray {
   double max_distance = std::numeric_limits<double>::infinity();
 };
 
+// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5); the
+// nearest corner when the triangle is degenerate.
+Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                       const Eigen::Vector3d& b, const Eigen::Vector3d& c);
+
 class RayCaster {
  public:
   // Throws InputError when the mesh has no triangle or an index out of range.

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "apps/default_rig.h"
+#include "apps/eval/raycast.h"
 #include "apps/synth/drive_writer.h"
 #include "apps/synth/renderer.h"
 #include "calib/drive.h"
@@ -65,30 +66,6 @@ SynthOptions SmallOptions(uint64_t seed) {
   options.trajectory.num_frames = 3;
   options.render.image_scale = 0.5;
   return options;
-}
-
-// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
-Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
-                                       const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return a;
-  const Eigen::Vector3d bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + d1 / (d1 - d3) * ab;
-  const Eigen::Vector3d cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + d2 / (d2 - d6) * ac;
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-    return b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b);
-  }
-  const double denominator = 1.0 / (va + vb + vc);
-  return a + ab * (vb * denominator) + ac * (vc * denominator);
 }
 
 double DistanceToMesh(const TriangleMesh& mesh, const Eigen::Vector3d& p) {

@@ -2,12 +2,11 @@
 // Internal to sfm/ (not a public header): runs an OpenGV sample-consensus problem with the
 // options of sfm/ransac.h, seeded, and refines the best model on its inliers.
 
-#include <opengv/sac/Ransac.hpp>
-#include <opengv/types.hpp>
-
 #include <cmath>
 #include <functional>
 #include <memory>
+#include <opengv/sac/Ransac.hpp>
+#include <opengv/types.hpp>
 #include <vector>
 
 #include "calib/pose.h"
@@ -39,8 +38,8 @@ RansacResult RunOpengvRansac(const std::shared_ptr<Problem>& problem, size_t num
 
   // The problem's generator is a copy of rng_alg_ bound at construction: reseed both.
   problem->rng_alg_.seed(options.seed);
-  problem->rng_gen_ = std::make_shared<std::function<int()>>(
-      std::bind(*problem->rng_dist_, problem->rng_alg_));
+  problem->rng_gen_ =
+      std::make_shared<std::function<int()>>(std::bind(*problem->rng_dist_, problem->rng_alg_));
 
   opengv::sac::Ransac<Problem> ransac;
   ransac.sac_model_ = problem;

@@ -27,8 +27,7 @@ Eigen::Vector3d RandomUnitInCone(std::mt19937& rng, double half_angle) {
   return Eigen::Vector3d(s * std::cos(phi), s * std::sin(phi), c);
 }
 
-Eigen::Vector3d AddAngularNoise(std::mt19937& rng, const Eigen::Vector3d& bearing,
-                                double noise) {
+Eigen::Vector3d AddAngularNoise(std::mt19937& rng, const Eigen::Vector3d& bearing, double noise) {
   if (noise <= 0.0) return bearing;
   std::normal_distribution<double> normal(0.0, noise);
   // Two tangent directions of the bearing.
@@ -138,10 +137,8 @@ SyntheticMatches MatchSyntheticFrames(const SyntheticScene& scene, int frame1, i
   std::vector<int> first1(num_points, -1), first2(num_points, -1);
   for (int i = 0; i < static_cast<int>(scene.observations.size()); ++i) {
     const SyntheticObservation& observation = scene.observations[i];
-    if (observation.frame == frame1 && first1[observation.point] < 0)
-      first1[observation.point] = i;
-    if (observation.frame == frame2 && first2[observation.point] < 0)
-      first2[observation.point] = i;
+    if (observation.frame == frame1 && first1[observation.point] < 0) first1[observation.point] = i;
+    if (observation.frame == frame2 && first2[observation.point] < 0) first2[observation.point] = i;
   }
   SyntheticMatches matches;
   for (size_t point = 0; point < num_points; ++point) {
@@ -156,6 +153,40 @@ SyntheticMatches MatchSyntheticFrames(const SyntheticScene& scene, int frame1, i
     matches.is_outlier.push_back(a.is_outlier || b.is_outlier);
   }
   return matches;
+}
+
+cv::Mat MakeSyntheticTexture(int width, int height, const Eigen::Vector2d& shift, int num_shapes,
+                             uint32_t seed) {
+  assert(width > 0 && height > 0 && num_shapes >= 0);
+  constexpr double kEdgeWidth = 0.7;  // pixels over which an edge rises (logistic scale)
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  cv::Mat accumulator(height, width, CV_64F, cv::Scalar(128.0));
+  for (int s = 0; s < num_shapes; ++s) {
+    const Eigen::Vector2d center(unit(rng) * width, unit(rng) * height);
+    const double half_x = 4.0 + 16.0 * unit(rng), half_y = 4.0 + 16.0 * unit(rng);
+    const double angle = M_PI * unit(rng);
+    const double amplitude = (unit(rng) < 0.5 ? -1.0 : 1.0) * (40.0 + 60.0 * unit(rng));
+    const double c = std::cos(angle), sn = std::sin(angle);
+    const double reach = std::hypot(half_x, half_y) + 4.0;
+    const int x0 = std::max(0, static_cast<int>(std::floor(center.x() + shift.x() - reach)));
+    const int x1 = std::min(width - 1, static_cast<int>(std::ceil(center.x() + shift.x() + reach)));
+    const int y0 = std::max(0, static_cast<int>(std::floor(center.y() + shift.y() - reach)));
+    const int y1 =
+        std::min(height - 1, static_cast<int>(std::ceil(center.y() + shift.y() + reach)));
+    for (int y = y0; y <= y1; ++y) {
+      double* row = accumulator.ptr<double>(y);
+      for (int x = x0; x <= x1; ++x) {
+        const double dx = x - shift.x() - center.x(), dy = y - shift.y() - center.y();
+        const double u = c * dx + sn * dy, v = -sn * dx + c * dy;
+        const double inside = std::min(half_x - std::abs(u), half_y - std::abs(v));
+        row[x] += amplitude / (1.0 + std::exp(-inside / kEdgeWidth));
+      }
+    }
+  }
+  cv::Mat image;
+  accumulator.convertTo(image, CV_8U);  // rounds and saturates
+  return image;
 }
 
 double RotationAngleBetween(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {

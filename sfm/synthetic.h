@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
 
@@ -19,9 +20,9 @@ struct SyntheticSceneOptions {
   // uniformly in [min_depth, max_depth] (metres).
   double min_depth = 2.0;
   double max_depth = 10.0;
-  double half_fov = 1.0;          // each camera sees a cone of this half-angle (radians)
-  double noise = 0.0;             // standard deviation of the angular noise (radians)
-  double outlier_ratio = 0.0;     // share of observations replaced by a wrong bearing
+  double half_fov = 1.0;           // each camera sees a cone of this half-angle (radians)
+  double noise = 0.0;              // standard deviation of the angular noise (radians)
+  double outlier_ratio = 0.0;      // share of observations replaced by a wrong bearing
   double min_outlier_angle = 0.1;  // an outlier bearing is at least this far from the truth
   uint32_t seed = 1;
 
@@ -62,6 +63,13 @@ struct SyntheticMatches {
   std::vector<char> is_outlier;  // either observation is an outlier
 };
 SyntheticMatches MatchSyntheticFrames(const SyntheticScene& scene, int frame1, int frame2);
+
+// A grey 8-bit image of random soft-edged rotated rectangles on a mid-grey background, corners
+// everywhere: I(x, y) = T(x − shift.x, y − shift.y), so that two calls with different shifts
+// give the same texture moved by an exact (possibly subpixel) amount. Rectangle edges are
+// blurred over about a pixel, so the shift is well defined below the pixel.
+cv::Mat MakeSyntheticTexture(int width, int height, const Eigen::Vector2d& shift, int num_shapes,
+                             uint32_t seed);
 
 // Angle of the rotation between two orientations (radians).
 double RotationAngleBetween(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b);

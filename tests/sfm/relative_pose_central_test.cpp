@@ -28,8 +28,8 @@ TEST_P(CentralRelativePoseTest, RecoversKnownPoseWithOutliers) {
   scene_options.noise = 0.0005;
   scene_options.outlier_ratio = 0.15;
   scene_options.seed = GetParam().seed;
-  const SyntheticScene scene = MakeSyntheticScene(rig, {world_from_rig0, world_from_rig1},
-                                                  scene_options);
+  const SyntheticScene scene =
+      MakeSyntheticScene(rig, {world_from_rig0, world_from_rig1}, scene_options);
   const SyntheticMatches matches = MatchSyntheticFrames(scene, 0, 1);
   ASSERT_GT(matches.bearings1.size(), 150u);
 
@@ -53,17 +53,16 @@ TEST_P(CentralRelativePoseTest, RecoversKnownPoseWithOutliers) {
   test::ExpectMaskMatchesTruth(result.inlier_mask, matches.is_outlier, 0.95);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Solvers, CentralRelativePoseTest,
-    ::testing::Values(Case{CentralRelativePoseOptions::Solver::kStewenius, 1},
-                      Case{CentralRelativePoseOptions::Solver::kStewenius, 7},
-                      Case{CentralRelativePoseOptions::Solver::kNister, 3}));
+INSTANTIATE_TEST_SUITE_P(Solvers, CentralRelativePoseTest,
+                         ::testing::Values(Case{CentralRelativePoseOptions::Solver::kStewenius, 1},
+                                           Case{CentralRelativePoseOptions::Solver::kStewenius, 7},
+                                           Case{CentralRelativePoseOptions::Solver::kNister, 3}));
 
 TEST(CentralRelativePose, FailsWithTooFewCorrespondences) {
   const std::vector<Eigen::Vector3d> bearings(4, Eigen::Vector3d::UnitZ());
   Rigid3d cam1_from_cam2;
-  const RansacResult result =
-      EstimateCentralRelativePose(bearings, bearings, CentralRelativePoseOptions(), &cam1_from_cam2);
+  const RansacResult result = EstimateCentralRelativePose(
+      bearings, bearings, CentralRelativePoseOptions(), &cam1_from_cam2);
   EXPECT_FALSE(result.success);
   EXPECT_EQ(result.inlier_mask.size(), 4u);
 }

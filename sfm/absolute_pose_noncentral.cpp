@@ -1,0 +1,37 @@
+#include "sfm/absolute_pose_noncentral.h"
+
+#include <cassert>
+#include <opengv/absolute_pose/NoncentralAbsoluteAdapter.hpp>
+#include <opengv/sac_problems/absolute_pose/AbsolutePoseSacProblem.hpp>
+
+#include "sfm/opengv_ransac.h"
+#include "sfm/opengv_rig.h"
+
+namespace omni {
+
+RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
+                                            const std::vector<Eigen::Vector3d>& bearings,
+                                            const std::vector<int>& cameras,
+                                            const std::vector<Eigen::Vector3d>& points_in_world,
+                                            const NoncentralAbsolutePoseOptions& options,
+                                            Rigid3d* world_from_rig) {
+  assert(bearings.size() == points_in_world.size() && cameras.size() == bearings.size());
+  assert(options.Check().empty());
+  using Problem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
+  const opengv::bearingVectors_t f = internal::ToOpengvVectors(bearings);
+  const opengv::points_t points(points_in_world.begin(), points_in_world.end());
+  opengv::translations_t cam_offsets;
+  opengv::rotations_t cam_rotations;
+  internal::ToOpengvRig(rig, &cam_offsets, &cam_rotations);
+  opengv::absolute_pose::NoncentralAbsoluteAdapter adapter(f, cameras, points, cam_offsets,
+                                                           cam_rotations);
+  auto problem = std::make_shared<Problem>(adapter, Problem::GP3P, /*randomSeed=*/false);
+  opengv::transformation_t model;
+  const RansacResult result = internal::RunOpengvRansac(
+      problem, bearings.size(), problem->getSampleSize(),
+      internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac, &model);
+  if (result.success) *world_from_rig = internal::FromOpengvTransformation(model);
+  return result;
+}
+
+}  // namespace omni

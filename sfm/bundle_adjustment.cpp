@@ -1,0 +1,279 @@
+#include "sfm/bundle_adjustment.h"
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <cassert>
+#include <cmath>
+#include <memory>
+#include <sstream>
+
+namespace omni {
+namespace {
+
+// The frame an observation's bearing is expressed in, and its pose in the rig frame:
+// non-central mode, the observing camera (frame_from_rig = cam_from_rig); central mode, the
+// rig's single central camera (rig axes, origin at the mean camera centre c0:
+// frame_from_rig = (I, -c0)), the bearing being rotated from the camera to the rig axes.
+struct ObservationFrame {
+  Eigen::Matrix3d frame_from_rig_rotation;
+  Eigen::Vector3d frame_from_rig_translation;
+  Eigen::Vector3d bearing;  // unit, in that frame
+};
+
+Eigen::Vector3d CentralCenter(const Rig& rig) {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (const Camera& camera : rig.cameras) sum += camera.cam_from_rig.Center();
+  return sum / static_cast<double>(rig.cameras.size());
+}
+
+ObservationFrame MakeObservationFrame(const Rig& rig, BundleAdjustmentOptions::Mode mode,
+                                      const Eigen::Vector3d& central_center, int camera,
+                                      const Eigen::Vector3d& bearing) {
+  const Rigid3d& cam_from_rig = rig.cameras[camera].cam_from_rig;
+  ObservationFrame frame;
+  if (mode == BundleAdjustmentOptions::Mode::kNonCentral) {
+    frame.frame_from_rig_rotation = cam_from_rig.rotation.toRotationMatrix();
+    frame.frame_from_rig_translation = cam_from_rig.translation;
+    frame.bearing = bearing.normalized();
+  } else {
+    frame.frame_from_rig_rotation.setIdentity();
+    frame.frame_from_rig_translation = -central_center;
+    frame.bearing = (cam_from_rig.rotation.conjugate() * bearing).normalized();
+  }
+  return frame;
+}
+
+// Angular residual on the tangent plane of an observed bearing b.
+//
+//   x_rig   = R_wr^T (X − t_wr)                   point in the rig frame (world_from_rig = R_wr,
+//   t_wr) p       = (R_fr x_rig + t_fr) / ‖·‖           predicted bearing in the observation frame
+//   f r       = 2 [u·p, v·p] / (1 + b·p)            (u, v) an orthonormal basis of b's tangent
+//   plane
+//
+// r is the stereographic projection of p from −b onto b's tangent plane: ‖r‖ = 2 tan(θ/2) for
+// the angle θ between p and b, so r ≈ the two components of the angular error (radians) for
+// small errors, grows without bound as p turns away from b (a point behind is never cheap), and
+// is smooth everywhere except at p = −b.
+class AngularResidual {
+ public:
+  explicit AngularResidual(const ObservationFrame& frame)
+      : frame_from_rig_rotation_(frame.frame_from_rig_rotation),
+        frame_from_rig_translation_(frame.frame_from_rig_translation),
+        bearing_(frame.bearing) {
+    tangent_u_ = bearing_.unitOrthogonal();
+    tangent_v_ = bearing_.cross(tangent_u_);
+  }
+
+  // Parameters: world_from_rig rotation (Eigen quaternion x y z w), world_from_rig
+  // translation, point in the world.
+  template <typename T>
+  bool operator()(const T* world_from_rig_q, const T* world_from_rig_t, const T* point,
+                  T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> q(world_from_rig_q);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> t(world_from_rig_t);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> x(point);
+    const Eigen::Matrix<T, 3, 1> x_rig = q.conjugate() * (x - t);
+    const Eigen::Matrix<T, 3, 1> x_frame =
+        frame_from_rig_rotation_.cast<T>() * x_rig + frame_from_rig_translation_.cast<T>();
+    const Eigen::Matrix<T, 3, 1> p = x_frame / x_frame.norm();
+    const T denominator = T(1.0) + bearing_.cast<T>().dot(p);
+    residual[0] = T(2.0) * tangent_u_.cast<T>().dot(p) / denominator;
+    residual[1] = T(2.0) * tangent_v_.cast<T>().dot(p) / denominator;
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const ObservationFrame& frame) {
+    return new ceres::AutoDiffCostFunction<AngularResidual, 2, 4, 3, 3>(new AngularResidual(frame));
+  }
+
+ private:
+  Eigen::Matrix3d frame_from_rig_rotation_;
+  Eigen::Vector3d frame_from_rig_translation_;
+  Eigen::Vector3d bearing_;
+  Eigen::Vector3d tangent_u_;
+  Eigen::Vector3d tangent_v_;
+};
+
+ceres::LossFunction* MakeLoss(const BundleAdjustmentOptions& options) {
+  switch (options.loss) {
+    case BundleAdjustmentOptions::Loss::kTrivial:
+      return nullptr;
+    case BundleAdjustmentOptions::Loss::kHuber:
+      return new ceres::HuberLoss(options.loss_scale);
+    case BundleAdjustmentOptions::Loss::kCauchy:
+      return new ceres::CauchyLoss(options.loss_scale);
+  }
+  return nullptr;
+}
+
+double AngleOf(const ObservationFrame& frame, const Rigid3d& world_from_rig,
+               const Eigen::Vector3d& point_in_world) {
+  const Eigen::Vector3d x_rig =
+      world_from_rig.rotation.conjugate() * (point_in_world - world_from_rig.translation);
+  const Eigen::Vector3d x_frame =
+      frame.frame_from_rig_rotation * x_rig + frame.frame_from_rig_translation;
+  if (x_frame.norm() == 0.0) return M_PI;
+  return std::atan2(x_frame.cross(frame.bearing).norm(), x_frame.dot(frame.bearing));
+}
+
+double RmsAngle(const Rig& rig, const BundleAdjustmentOptions& options,
+                const BundleAdjustmentProblem& problem) {
+  if (problem.observations.empty()) return 0.0;
+  const Eigen::Vector3d center = CentralCenter(rig);
+  double sum = 0.0;
+  for (const BundleAdjustmentObservation& observation : problem.observations) {
+    const ObservationFrame frame =
+        MakeObservationFrame(rig, options.mode, center, observation.camera, observation.bearing);
+    const double angle = AngleOf(frame, problem.keyframes[observation.keyframe].world_from_rig,
+                                 problem.points_in_world[observation.point]);
+    sum += angle * angle;
+  }
+  return std::sqrt(sum / problem.observations.size());
+}
+
+// One Ceres solve over the current observations. Returns false when Ceres reports no usable
+// solution.
+bool Solve(const Rig& rig, const BundleAdjustmentOptions& options, BundleAdjustmentProblem* problem,
+           BundleAdjustmentSummary* summary) {
+  // Ceres parameter blocks: quaternion (x y z w) and translation per keyframe; points in place.
+  std::vector<Eigen::Vector4d> rotations(problem->keyframes.size());
+  std::vector<Eigen::Vector3d> translations(problem->keyframes.size());
+  for (size_t i = 0; i < problem->keyframes.size(); ++i) {
+    rotations[i] = problem->keyframes[i].world_from_rig.rotation.normalized().coeffs();
+    translations[i] = problem->keyframes[i].world_from_rig.translation;
+  }
+
+  ceres::Problem::Options problem_options;
+  problem_options.manifold_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem ceres_problem(problem_options);
+  const Eigen::Vector3d center = CentralCenter(rig);
+  std::vector<char> keyframe_used(problem->keyframes.size(), 0);
+  std::vector<char> point_used(problem->points_in_world.size(), 0);
+  for (const BundleAdjustmentObservation& observation : problem->observations) {
+    const ObservationFrame frame =
+        MakeObservationFrame(rig, options.mode, center, observation.camera, observation.bearing);
+    ceres_problem.AddResidualBlock(AngularResidual::Create(frame), MakeLoss(options),
+                                   rotations[observation.keyframe].data(),
+                                   translations[observation.keyframe].data(),
+                                   problem->points_in_world[observation.point].data());
+    keyframe_used[observation.keyframe] = 1;
+    point_used[observation.point] = 1;
+  }
+  if (ceres_problem.NumResidualBlocks() == 0) return false;
+
+  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+  for (size_t i = 0; i < problem->keyframes.size(); ++i) {
+    if (!keyframe_used[i]) continue;
+    ceres_problem.SetManifold(rotations[i].data(), new ceres::EigenQuaternionManifold);
+    if (problem->keyframes[i].fixed) {
+      ceres_problem.SetParameterBlockConstant(rotations[i].data());
+      ceres_problem.SetParameterBlockConstant(translations[i].data());
+    }
+    ordering->AddElementToGroup(rotations[i].data(), 1);
+    ordering->AddElementToGroup(translations[i].data(), 1);
+  }
+  for (size_t i = 0; i < problem->points_in_world.size(); ++i) {
+    if (!point_used[i]) continue;
+    ordering->AddElementToGroup(problem->points_in_world[i].data(), 0);
+    if (!problem->point_fixed.empty() && problem->point_fixed[i])
+      ceres_problem.SetParameterBlockConstant(problem->points_in_world[i].data());
+  }
+
+  ceres::Solver::Options solver_options;
+  solver_options.linear_solver_type =
+      options.linear_solver == BundleAdjustmentOptions::LinearSolver::kDenseSchur
+          ? ceres::DENSE_SCHUR
+          : ceres::SPARSE_SCHUR;
+  solver_options.linear_solver_ordering = ordering;
+  solver_options.max_num_iterations = options.max_iterations;
+  solver_options.function_tolerance = options.function_tolerance;
+  solver_options.num_threads = options.num_threads;
+  solver_options.logging_type = ceres::SILENT;
+  solver_options.minimizer_progress_to_stdout = false;
+  ceres::Solver::Summary ceres_summary;
+  ceres::Solve(solver_options, &ceres_problem, &ceres_summary);
+
+  summary->num_iterations += static_cast<int>(ceres_summary.iterations.size());
+  if (summary->initial_cost == 0.0) summary->initial_cost = ceres_summary.initial_cost;
+  summary->final_cost = ceres_summary.final_cost;
+  if (!ceres_summary.IsSolutionUsable()) return false;
+  for (size_t i = 0; i < problem->keyframes.size(); ++i) {
+    if (problem->keyframes[i].fixed || !keyframe_used[i]) continue;
+    problem->keyframes[i].world_from_rig =
+        Rigid3d(Eigen::Quaterniond(rotations[i]).normalized(), translations[i]);
+  }
+  return true;
+}
+
+}  // namespace
+
+std::string BundleAdjustmentOptions::Check() const {
+  if (!(loss_scale > 0.0)) return "loss_scale: expected a positive angle (radians)";
+  if (max_iterations < 1) return "max_iterations: expected at least 1";
+  if (!(function_tolerance > 0.0)) return "function_tolerance: expected a positive value";
+  if (num_threads < 1) return "num_threads: expected at least 1";
+  if (!(max_outlier_angle > 0.0)) return "max_outlier_angle: expected a positive angle (radians)";
+  return {};
+}
+
+std::string BundleAdjustmentSummary::BriefReport() const {
+  std::ostringstream out;
+  out << "bundle adjustment: " << (success ? "ok" : "failed") << ", " << num_iterations
+      << " iterations, cost " << initial_cost << " -> " << final_cost << ", rms angle "
+      << rms_angle_before << " -> " << rms_angle_after << " rad, " << removed_observations.size()
+      << " outliers removed";
+  return out.str();
+}
+
+double ObservationAngle(const Rig& rig, const BundleAdjustmentOptions::Mode mode,
+                        const Rigid3d& world_from_rig, const Eigen::Vector3d& point_in_world,
+                        int camera, const Eigen::Vector3d& bearing) {
+  const ObservationFrame frame =
+      MakeObservationFrame(rig, mode, CentralCenter(rig), camera, bearing);
+  return AngleOf(frame, world_from_rig, point_in_world);
+}
+
+BundleAdjustmentSummary LocalBundleAdjust(const Rig& rig, const BundleAdjustmentOptions& options,
+                                          BundleAdjustmentProblem* problem) {
+  assert(options.Check().empty());
+  assert(!rig.cameras.empty());
+  assert(problem->point_fixed.empty() ||
+         problem->point_fixed.size() == problem->points_in_world.size());
+  for ([[maybe_unused]] const BundleAdjustmentObservation& observation : problem->observations) {
+    assert(observation.keyframe >= 0 &&
+           observation.keyframe < static_cast<int>(problem->keyframes.size()));
+    assert(observation.camera >= 0 && observation.camera < static_cast<int>(rig.NumCameras()));
+    assert(observation.point >= 0 &&
+           observation.point < static_cast<int>(problem->points_in_world.size()));
+  }
+  BundleAdjustmentSummary summary;
+  summary.rms_angle_before = RmsAngle(rig, options, *problem);
+  if (!Solve(rig, options, problem, &summary)) return summary;
+
+  // Remove the outliers, keeping the original indices of the removed ones.
+  const Eigen::Vector3d center = CentralCenter(rig);
+  std::vector<BundleAdjustmentObservation> kept;
+  kept.reserve(problem->observations.size());
+  for (size_t i = 0; i < problem->observations.size(); ++i) {
+    const BundleAdjustmentObservation& observation = problem->observations[i];
+    const ObservationFrame frame =
+        MakeObservationFrame(rig, options.mode, center, observation.camera, observation.bearing);
+    const double angle = AngleOf(frame, problem->keyframes[observation.keyframe].world_from_rig,
+                                 problem->points_in_world[observation.point]);
+    if (angle > options.max_outlier_angle)
+      summary.removed_observations.push_back(static_cast<int>(i));
+    else
+      kept.push_back(observation);
+  }
+  problem->observations = std::move(kept);
+  if (!summary.removed_observations.empty() && options.resolve_after_outlier_removal &&
+      !problem->observations.empty()) {
+    if (!Solve(rig, options, problem, &summary)) return summary;
+  }
+  summary.rms_angle_after = RmsAngle(rig, options, *problem);
+  summary.success = true;
+  return summary;
+}
+
+}  // namespace omni

@@ -1,0 +1,62 @@
+#pragma once
+// Harris corners with an even spatial spread (a quota per grid bucket) and subpixel refinement
+// (paper §2 after Mouragnon et al.: Harris points matched along the sequence; issue 8).
+//
+// Images go through PrepareImage once (grey, 8 bits, optionally downscaled: the paper halves
+// the Ladybug images to 512×384); detection and matching work in the prepared image's pixels,
+// and PreparedToInputPixel maps a corner back to the input image for Camera::Unproject.
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+namespace omni {
+
+struct HarrisOptions {
+  // Corners kept per image (paper §2 / Mouragnon et al.: about 300–400 per image).
+  int max_corners = 350;
+  // The image is split into grid_cols × grid_rows buckets, each keeping at most its share.
+  int grid_cols = 8;
+  int grid_rows = 6;
+  // Input images are shrunk by this factor before detection (1: none; 2: the paper's halving).
+  double downscale = 1.0;
+  int block_size = 3;      // Harris neighbourhood (pixels)
+  int sobel_aperture = 3;  // derivative kernel
+  double harris_k = 0.04;
+  // A corner's response must be at least this share of the image's strongest response
+  // (cv::goodFeaturesToTrack's usual 0.01).
+  double quality_level = 0.01;
+  // Non-maximum suppression radius: kept corners are at least this far apart (pixels).
+  int min_distance = 4;
+  // Corners closer than this to the border are dropped (leave room for matching windows).
+  int border = 8;
+  // cv::cornerSubPix: half window, iterations and stopping step (pixels).
+  int subpixel_half_window = 3;
+  int subpixel_iterations = 20;
+  double subpixel_epsilon = 0.01;
+  // A corner the subpixel step moves farther than this from its integer maximum is not a
+  // well-localised corner (an edge or a blob): it is dropped (pixels; the Harris maximum sits
+  // about a pixel inside a blurred corner).
+  double max_subpixel_shift = 2.0;
+
+  std::string Check() const;
+};
+
+struct Corner {
+  Eigen::Vector2d pixel = Eigen::Vector2d::Zero();  // prepared image, subpixel
+  float response = 0.0f;                            // Harris response
+};
+
+// Grey 8-bit image, shrunk by options.downscale (cv::INTER_AREA). Accepts 8-bit grey, BGR or
+// BGRA, or 16-bit grey.
+cv::Mat PrepareImage(const cv::Mat& input, const HarrisOptions& options);
+
+// Pixel of the prepared image -> pixel of the input image (pixel centres at integers).
+Eigen::Vector2d PreparedToInputPixel(const Eigen::Vector2d& prepared, double downscale);
+Eigen::Vector2d InputToPreparedPixel(const Eigen::Vector2d& input, double downscale);
+
+// Corners of a prepared image, strongest first.
+std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOptions& options);
+
+}  // namespace omni

@@ -1,0 +1,60 @@
+#pragma once
+// Matching of corners between two prepared images by the zero-mean normalised cross-correlation
+// (ZNCC) of small windows, each corner of the first image searching only inside its predicted
+// region of the second (from the motion model, or by reprojection once the pose is known),
+// with a distinctiveness (ratio) check and a mutual-best check (issue 8).
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+namespace omni {
+
+struct ZnccOptions {
+  int half_window = 5;  // windows of (2 half_window + 1)² pixels (Mouragnon et al. use 11×11)
+  double min_zncc = 0.8;
+  // Distinctiveness: with d = sqrt(1 − zncc) (proportional to the distance between normalised
+  // windows), the best candidate must satisfy d_best < max_distance_ratio · d_second.
+  double max_distance_ratio = 0.8;
+  bool mutual = true;  // the match must also be the best for the second image's corner
+  // Refine the matched position in the second image to the subpixel maximum of the ZNCC
+  // (separable parabola fits on samples subpixel_step apart, subpixel_iterations times), so
+  // the match follows the first corner's window rather than the second detector's corner.
+  bool subpixel = true;
+  double subpixel_step = 0.5;
+  int subpixel_iterations = 3;
+
+  std::string Check() const;
+};
+
+// Where a corner of the first image is looked for in the second: a disc (pixels of the second
+// prepared image). A negative radius skips the corner.
+struct SearchRegion {
+  Eigen::Vector2d center = Eigen::Vector2d::Zero();
+  double radius = 20.0;
+};
+
+struct ZnccMatch {
+  int index1 = -1;  // corner of the first image
+  int index2 = -1;  // corner of the second image
+  double zncc = 0.0;
+  // Where the first corner's window lies in the second image: corners2[index2], or the
+  // subpixel ZNCC maximum near it when ZnccOptions::subpixel is set.
+  Eigen::Vector2d pixel2 = Eigen::Vector2d::Zero();
+};
+
+// ZNCC of the windows centred at two subpixel positions (bilinear sampling); NaN when a window
+// leaves its image or is flat.
+double Zncc(const cv::Mat& image1, const Eigen::Vector2d& pixel1, const cv::Mat& image2,
+            const Eigen::Vector2d& pixel2, int half_window);
+
+// corners1/corners2 are pixels of the prepared (grey 8-bit) images; regions has one entry per
+// corner of the first image. Each corner appears in at most one match.
+std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
+                                 const std::vector<Eigen::Vector2d>& corners1,
+                                 const std::vector<SearchRegion>& regions, const cv::Mat& image2,
+                                 const std::vector<Eigen::Vector2d>& corners2,
+                                 const ZnccOptions& options);
+
+}  // namespace omni

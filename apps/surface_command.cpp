@@ -13,7 +13,9 @@
 #include <string>
 
 #include "apps/commands.h"
+#include "apps/surface/colmap_keyframes.h"
 #include "apps/surface/gt_keyframes.h"
+#include "calib/tum.h"
 #include "calib/atomic_file.h"
 #include "calib/error.h"
 #include "calib/ply.h"
@@ -25,9 +27,11 @@ namespace {
 
 struct SurfaceCommandOptions {
   std::string from_gt;
+  std::string colmap;  // a COLMAP text model folder
   std::string out;
   std::string enclosing = "ball";
   bool no_batch = false;
+  int snapshot_every = 0;  // write OUT/snapshots/surface_<keyframe>.ply every K keyframes; 0: none
   GtKeyframeOptions gt;
   SculptorOptions sculptor;
 };
@@ -39,7 +43,9 @@ double Quantile(std::vector<double> v, double q) {
 }
 
 void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
-  if (o.from_gt.empty()) throw InputError("", "--from-gt", "a drive with gt/ is required");
+  if (o.from_gt.empty() == o.colmap.empty()) {
+    throw InputError("", "--from-gt/--colmap", "exactly one input is required");
+  }
   if (o.out.empty()) throw InputError("", "--out", "an output folder is required");
   if (o.enclosing == "ball") {
     o.sculptor.enclosing = EnclosingMode::kBall;
@@ -49,29 +55,49 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     throw InputError("", "--enclosing", "expected ball or conflict, got '" + o.enclosing + "'");
   }
   o.sculptor.batch_init = !o.no_batch;
+  if (o.snapshot_every < 0) throw InputError("", "--snapshot-every", "must be >= 0");
   for (const std::string& problem : {o.sculptor.Check(), o.gt.Check()}) {
     if (!problem.empty()) throw InputError("", "options", problem);
   }
   const auto start = std::chrono::steady_clock::now();
-  const std::vector<SurfaceKeyframe> stream = LoadGtKeyframes(o.from_gt, o.gt);
+  std::vector<StampedPose> keyframe_poses;  // known for --from-gt only
+  const std::vector<SurfaceKeyframe> stream =
+      o.colmap.empty() ? LoadGtKeyframes(o.from_gt, o.gt, nullptr, &keyframe_poses)
+                       : LoadColmapKeyframes(o.colmap);
   const double gen_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   size_t num_points = 0;
   for (const auto& kf : stream) num_points += kf.points.size();
-  spdlog::info("surface: {} keyframes, {} points from the ground truth of {} ({:.1f} s)",
-               stream.size(), num_points, o.from_gt, gen_s);
+  spdlog::info(
+      "surface: {} keyframes, {} points from {} ({:.1f} s)", stream.size(), num_points,
+      o.colmap.empty() ? "the ground truth of " + o.from_gt : "the COLMAP model " + o.colmap,
+      gen_s);
 
+  const std::filesystem::path out(o.out);
   IncrementalSculptor sculptor(o.sculptor);
   std::vector<KeyframeStats> stats;
+  size_t processed = 0;  // keyframes sculpted so far (a batch counts its keyframes)
+  // After each call: a snapshot when a multiple of K keyframes was passed (only the state after
+  // the call exists, so a batch gives one snapshot, named after its last keyframe).
+  auto snapshot = [&](const std::vector<KeyframeStats>& new_stats) {
+    stats.insert(stats.end(), new_stats.begin(), new_stats.end());
+    const size_t before = processed;
+    processed = sculptor.NumProcessedKeyframes();
+    const size_t k = static_cast<size_t>(o.snapshot_every);
+    if (k == 0 || new_stats.empty() || processed / k == before / k) return;
+    std::filesystem::create_directories(out / "snapshots");
+    WritePlyMesh(sculptor.ExtractMesh(),
+                 out / "snapshots" /
+                     ("surface_" + std::to_string(new_stats.back().keyframe.value) + ".ply"));
+  };
   for (size_t i = 0; i < stream.size(); ++i) {
-    for (const KeyframeStats& st : sculptor.AddKeyframe(stream[i])) stats.push_back(st);
+    snapshot(sculptor.AddKeyframe(stream[i]));
     if (!global.quiet && (i + 1) % 50 == 0) {
       spdlog::info("surface: keyframe {}/{}", i + 1, stream.size());
     }
   }
-  for (const KeyframeStats& st : sculptor.Finish()) stats.push_back(st);
+  snapshot(sculptor.Finish());
 
-  const std::filesystem::path out(o.out);
   std::filesystem::create_directories(out / "stats");
   const TriangleMesh mesh = sculptor.ExtractMesh();
   WritePlyMesh(mesh, out / "surface.ply");
@@ -79,6 +105,15 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   csv << KeyframeStatsCsvHeader() << "\n";
   for (const KeyframeStats& st : stats) csv << KeyframeStatsCsvRow(st) << "\n";
   WriteTextFileAtomically(out / "stats" / "keyframes.csv", csv.str());
+  // The input side of the reconstruction folder (DESIGN.md §4), so that `omnisculpt eval` reads
+  // it like the pipeline's: the points fed to the sculptor and, from --from-gt, the keyframe
+  // poses of the simulated SfM.
+  PointCloud points;
+  for (const SurfaceKeyframe& kf : stream) {
+    for (const SurfacePoint& point : kf.points) points.points.push_back(point.position);
+  }
+  WritePlyPoints(points, out / "points.ply");
+  if (!keyframe_poses.empty()) WriteTum(keyframe_poses, out / "poses.tum");
 
   std::vector<double> ms;
   size_t max_e = 0, added = 0, rejected = 0;
@@ -114,7 +149,10 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       "--from-gt simulates a perfect SfM on a drive's ground truth");
   command->add_option("--from-gt", o->from_gt,
                       "Drive folder with rig.json, gt/poses.tum, gt/mesh.ply");
-  command->add_option("--out", o->out, "Output folder (surface.ply, stats/keyframes.csv)");
+  command->add_option("--colmap", o->colmap,
+                      "COLMAP text model folder (cameras.txt, images.txt, points3D.txt); images "
+                      "sharing a file name in different folders form one rig keyframe");
+  command->add_option("--out", o->out, "Output folder (surface.ply, points.ply, poses.tum with --from-gt, stats/keyframes.csv)");
   command
       ->add_option("--enclosing", o->enclosing,
                    "Enclosing set E: ball (paper §4.1) | conflict (conflict zones + margin)")
@@ -132,6 +170,10 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
   command->add_option("--max-keyframes", o->gt.max_keyframes, "0: the whole drive")
       ->capture_default_str();
   command->add_option("--point-noise", o->gt.point_noise, "Gaussian noise on points, metres")
+      ->capture_default_str();
+  command
+      ->add_option("--snapshot-every", o->snapshot_every,
+                   "Write OUT/snapshots/surface_<keyframe>.ply every K keyframes (0: none)")
       ->capture_default_str();
   command->add_option("--seed", o->gt.seed, "Seed of the point sampling")->capture_default_str();
   command->callback([o, &global] { RunSurface(*o, global); });

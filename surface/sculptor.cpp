@@ -69,9 +69,11 @@ double MsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// Whether the segment a→b meets the box; *exit: the largest parameter (a + t (b − a)) inside.
+// Whether the segment a→b meets the box; *exit (*entry): the largest (smallest) parameter
+// (a + t (b − a)) inside.
 bool SegmentHitsBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                    const Eigen::AlignedBox3d& box, double* exit = nullptr) {
+                    const Eigen::AlignedBox3d& box, double* exit = nullptr,
+                    double* entry = nullptr) {
   double lo = 0.0, hi = 1.0;
   const Eigen::Vector3d d = b - a;
   for (int k = 0; k < 3; ++k) {
@@ -86,6 +88,7 @@ bool SegmentHitsBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
     if (lo > hi) return false;
   }
   if (exit) *exit = hi;
+  if (entry) *entry = lo;
   return true;
 }
 
@@ -146,25 +149,61 @@ class BoxIndex {
     return last;
   }
 
-  bool SegmentHits(const Eigen::Vector3d& a, const Eigen::Vector3d& b) const {
+  // Bounds [*first, *last] of the parameters (a + t (b − a)) where the segment a→b can be in a
+  // box: false when it meets none. *box: a box met at the voxel of *first (a hint). Scans the
+  // samples from a, then from b, each scan stopping at the first voxel with a box met: a box met
+  // from t_e on has a sample within half a voxel of t_e in one of its (grown) voxels, so the
+  // first sample from a with a hit is at t_f ≤ t_e + voxel/length (mirrored from b). Each box
+  // is tested at most once per scan however many voxels it was registered in.
+  bool HitRange(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double* first, double* last,
+                int* box) const {
+    *first = 2.0;
+    *last = -1.0;
+    *box = -1;
     if (!SegmentHitsBox(a, b, bounds_)) return false;
-    for (int id : large_) {
-      if (SegmentHitsBox(a, b, boxes_[id])) return true;
+    thread_local std::vector<uint32_t> tested;  // per box: the scan stamp that tested it
+    thread_local uint32_t scan = 0;
+    thread_local const BoxIndex* owner = nullptr;
+    if (owner != this || tested.size() != boxes_.size() || scan > 0xfffffff0u) {
+      owner = this;
+      tested.assign(boxes_.size(), 0);
+      scan = 0;
     }
     const double length = (b - a).norm();
+    const double slack = voxel_ / std::max(length, 1e-300);
     const int samples = static_cast<int>(std::ceil(length / (0.5 * voxel_))) + 1;
-    uint64_t last = ~uint64_t{0};
-    for (int n = 0; n <= samples; ++n) {
-      const uint64_t key = Key(Voxel(a + (b - a) * (static_cast<double>(n) / samples)));
-      if (key == last) continue;
-      last = key;
-      const auto it = grid_.find(key);
-      if (it == grid_.end()) continue;
-      for (int id : it->second) {
-        if (SegmentHitsBox(a, b, boxes_[id])) return true;
+    double entry, exit;
+    for (int direction = 0; direction < 2; ++direction) {
+      const bool forward = direction == 0;
+      ++scan;
+      bool found = false;
+      auto consider = [&](int id) {
+        if (tested[id] == scan) return;
+        tested[id] = scan;
+        if (!SegmentHitsBox(a, b, boxes_[id], &exit, &entry)) return;
+        found = true;
+        if (forward && entry < *first) *first = entry, *box = id;
+        if (!forward) *last = std::max(*last, exit);
+      };
+      for (int id : large_) consider(id);
+      uint64_t previous = ~uint64_t{0};
+      for (int n = 0; n <= samples; ++n) {
+        const double t = static_cast<double>(forward ? n : samples - n) / samples;
+        const uint64_t key = Key(Voxel(a + (b - a) * t));
+        if (key == previous) continue;
+        previous = key;
+        const auto it = grid_.find(key);
+        if (it == grid_.end()) continue;
+        for (int id : it->second) consider(id);
+        if (found) {
+          if (forward) *first = std::min(*first, std::max(0.0, t - slack));
+          if (!forward) *last = std::max(*last, std::min(1.0, t + slack));
+          break;
+        }
       }
+      if (!found) return false;
     }
-    return false;
+    return true;
   }
 
  private:
@@ -226,9 +265,14 @@ struct KeyframeRecord {
 };
 
 struct RayTask {
+  RayTask(VertexHandle v, const Point& p) : from(v), target(p) {}
   VertexHandle from;
   Point target;
   double stop = 2.0;  // the walk may stop once past this parameter along from→target
+  // The walk may start at the cell holding from + start (target − from), located from `hint`
+  // (0: from the vertex). Only for rays that count the new cells alone (§4.4).
+  double start = 0.0;
+  CellHandle hint;
 };
 
 }  // namespace
@@ -627,15 +671,35 @@ struct IncrementalSculptor::Impl {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, tasks.size(), 64),
                       [&](const tbb::blocked_range<size_t>& range) {
                         size_t local = 0;
+                        auto visit = [&](CellHandle c) {
+                          if (only_new && c->info().date != date) return;
+                          if (!only_new)
+                            __atomic_store_n(&c->info().ray_stamp, date, __ATOMIC_RELAXED);
+                          if (__atomic_fetch_add(&c->info().counter, 1u, __ATOMIC_RELAXED) == 0) {
+                            ++local;
+                          }
+                        };
                         for (size_t i = range.begin(); i != range.end(); ++i) {
-                          t.Walk(tasks[i].from, tasks[i].target, tasks[i].stop, [&](CellHandle c) {
-                            if (only_new && c->info().date != date) return;
-                            if (!only_new)
-                              __atomic_store_n(&c->info().ray_stamp, date, __ATOMIC_RELAXED);
-                            if (__atomic_fetch_add(&c->info().counter, 1u, __ATOMIC_RELAXED) == 0) {
-                              ++local;
+                          const RayTask& task = tasks[i];
+                          if (task.start > 0.0 && only_new) {
+                            // Start inside the segment, at the cell holding a point before
+                            // every new cell it can meet; exact when the segment enters that
+                            // cell cleanly (any walk of the segment then crosses it through
+                            // the same facet), otherwise the whole walk.
+                            const Point& a = task.from->point();
+                            const Point q(a.x() + task.start * (task.target.x() - a.x()),
+                                          a.y() + task.start * (task.target.y() - a.y()),
+                                          a.z() + task.start * (task.target.z() - a.z()));
+                            internal::Delaunay::Locate_type lt;
+                            int li, lj;
+                            const CellHandle c = t.tri.locate(q, lt, li, lj, task.hint);
+                            const int entry = t.EntryFacet(a, task.target, c);
+                            if (entry >= 0) {
+                              t.WalkFrom(a, task.target, c, entry, task.stop, visit);
+                              continue;
                             }
-                          });
+                          }
+                          t.Walk(task.from, task.target, task.stop, visit);
                         }
                         became_free += local;
                       });
@@ -739,13 +803,13 @@ struct IncrementalSculptor::Impl {
     std::vector<RayTask> tasks;
     for (int i : rec.points) {
       for (const Eigen::Vector3d& o : points[i].origins)
-        tasks.push_back({points[i].vertex, ToCgal(o)});
+        tasks.emplace_back(points[i].vertex, ToCgal(o));
     }
     st.rays_new = tasks.size();
     Trace(tasks, false);
     tasks.clear();
     if (!n_cells.empty()) {
-      BoxIndex index_n(2.0 * s);  // X_N, refined into one box per new cell
+      BoxIndex index_n(2.0 * s);  // X_N, refined into one box per new cell (in n_cells order)
       for (const CellHandle& c : n_cells) {
         Eigen::AlignedBox3d box;
         for (int i = 0; i < 4; ++i) box.extend(ToEigen(c->vertex(i)->point()));
@@ -756,20 +820,36 @@ struct IncrementalSculptor::Impl {
         if (!old.ray_box.intersects(index_n.bounds())) continue;
         for (int i : old.points) {
           for (const Eigen::Vector3d& o : points[i].origins) {
-            candidates.push_back({points[i].vertex, ToCgal(o)});
+            candidates.emplace_back(points[i].vertex, ToCgal(o));
           }
         }
       }
       std::vector<double> last(candidates.size(), -1.0);
+      const bool clip = options.clip_old_rays;
+      const bool locate_start = clip && options.locate_old_ray_start;
       tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates.size(), 256),
                         [&](const tbb::blocked_range<size_t>& range) {
                           for (size_t i = range.begin(); i != range.end(); ++i) {
-                            last[i] = index_n.LastHit(ToEigen(candidates[i].from->point()),
-                                                      ToEigen(candidates[i].target));
+                            RayTask& task = candidates[i];
+                            const Eigen::Vector3d a = ToEigen(task.from->point());
+                            const Eigen::Vector3d b = ToEigen(task.target);
+                            last[i] = index_n.LastHit(a, b);
+                            if (!clip || last[i] < 0.0) continue;
+                            task.stop = last[i];
+                            if (!locate_start) continue;
+                            double first, exact_last;
+                            int box;
+                            if (!index_n.HitRange(a, b, &first, &exact_last, &box)) continue;
+                            // Start a margin before the first box, far above the rounding of
+                            // the located point.
+                            first -= 1e-7;
+                            if (first > 0.0) {
+                              task.start = first;
+                              task.hint = n_cells[box];
+                            }
                           }
                         });
       for (size_t i = 0; i < candidates.size(); ++i) {
-        if (last[i] >= 0.0 && options.clip_old_rays) candidates[i].stop = last[i];
         if (last[i] >= 0.0) tasks.push_back(candidates[i]);
       }
     }
@@ -837,7 +917,7 @@ struct IncrementalSculptor::Impl {
     tick = Clock::now();
     std::vector<RayTask> tasks;
     for (const PointRecord& p : points) {
-      for (const Eigen::Vector3d& o : p.origins) tasks.push_back({p.vertex, ToCgal(o)});
+      for (const Eigen::Vector3d& o : p.origins) tasks.emplace_back(p.vertex, ToCgal(o));
     }
     st.rays_new = tasks.size();
     Trace(tasks, false);

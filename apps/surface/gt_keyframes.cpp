@@ -87,13 +87,15 @@ std::string GtKeyframeOptions::Check() const {
   return "";
 }
 
-std::vector<Eigen::Vector3d> SelectKeyframeCentres(const std::vector<Eigen::Vector3d>& centres,
-                                                   double spacing) {
-  std::vector<Eigen::Vector3d> out;
-  for (const Eigen::Vector3d& c : centres) {
-    if (out.empty() || (c - out.back()).norm() >= spacing) out.push_back(c);
+std::vector<size_t> SelectKeyframeFrames(const std::vector<Eigen::Vector3d>& centres,
+                                         double spacing) {
+  std::vector<size_t> frames;
+  for (size_t i = 0; i < centres.size(); ++i) {
+    if (frames.empty() || (centres[i] - centres[frames.back()]).norm() >= spacing) {
+      frames.push_back(i);
+    }
   }
-  return out;
+  return frames;
 }
 
 std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
@@ -149,7 +151,8 @@ std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
 
 std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
                                              const GtKeyframeOptions& options,
-                                             TriangleMesh* gt_mesh) {
+                                             TriangleMesh* gt_mesh,
+                                             std::vector<StampedPose>* keyframe_poses) {
   const Rig rig = ReadRigJson(drive / "rig.json");
   const std::vector<StampedPose> poses = ReadTum(drive / "gt" / "poses.tum");
   if (poses.empty()) throw InputError(drive / "gt" / "poses.tum", "", "no pose");
@@ -158,8 +161,14 @@ std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
   const Eigen::Vector3d centre_in_rig = rig.CentralCenterInRig();
   std::vector<Eigen::Vector3d> centres;
   for (const StampedPose& pose : poses) centres.push_back(pose.world_from_rig * centre_in_rig);
-  auto stream =
-      MakeGtKeyframes(mesh, SelectKeyframeCentres(centres, options.keyframe_spacing), options);
+  const std::vector<size_t> frames = SelectKeyframeFrames(centres, options.keyframe_spacing);
+  std::vector<Eigen::Vector3d> keyframe_centres;
+  for (size_t frame : frames) keyframe_centres.push_back(centres[frame]);
+  auto stream = MakeGtKeyframes(mesh, keyframe_centres, options);
+  if (keyframe_poses) {
+    keyframe_poses->clear();
+    for (size_t t = 0; t < stream.size(); ++t) keyframe_poses->push_back(poses[frames[t]]);
+  }
   if (gt_mesh) *gt_mesh = std::move(mesh);
   return stream;
 }

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "calib/ply.h"
+#include "calib/tum.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -29,9 +30,10 @@ struct GtKeyframeOptions {
   std::string Check() const;
 };
 
-// Keyframe centres every keyframe_spacing metres along the centres of a trajectory.
-std::vector<Eigen::Vector3d> SelectKeyframeCentres(const std::vector<Eigen::Vector3d>& centres,
-                                                   double spacing);
+// Indices of the keyframes: the first frame, then each frame whose centre is at least
+// `spacing` metres from the previous keyframe's.
+std::vector<size_t> SelectKeyframeFrames(const std::vector<Eigen::Vector3d>& centres,
+                                         double spacing);
 
 // The keyframe stream of DESIGN.md §4 over `mesh` seen from `keyframe_centres` (Embree).
 std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
@@ -40,9 +42,11 @@ std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
 
 // Reads DRIVE/rig.json, DRIVE/gt/poses.tum and DRIVE/gt/mesh.ply (InputError when missing or
 // malformed) and returns the stream; the centre of a frame is world_from_rig applied to the
-// rig's central centre.
+// rig's central centre. keyframe_poses, when given, receives the ground-truth pose of each
+// keyframe of the stream (what a perfect SfM would write as poses.tum).
 std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
                                              const GtKeyframeOptions& options,
-                                             TriangleMesh* gt_mesh = nullptr);
+                                             TriangleMesh* gt_mesh = nullptr,
+                                             std::vector<StampedPose>* keyframe_poses = nullptr);
 
 }  // namespace omni

@@ -83,6 +83,23 @@ struct DelaunayMesh::Impl {
   template <typename Visit>
   void Walk(internal::VertexHandle from, const internal::Point& target, double stop,
             Visit&& visit) const;
+  // The same walk of the segment `from`→`target` continued from cell `start`, which the segment
+  // must enter through its facet `entry` (see EntryFacet): visits the same cells as Walk from
+  // `start` on. Thread-safe like Walk.
+  template <typename Visit>
+  void WalkFrom(const internal::Point& from, const internal::Point& target,
+                internal::CellHandle start, int entry, double stop, Visit&& visit) const;
+  // The facet of finite cell c through which the segment from→target enters c, when it does so
+  // without degeneracy: `from` strictly beyond the facet's plane, `target` strictly inside and
+  // the line through the open triangle. -1 otherwise (then use Walk). Exact predicates.
+  int EntryFacet(const internal::Point& from, const internal::Point& target,
+                 internal::CellHandle c) const;
+
+  // The walk loop shared by Walk and WalkFrom (first: `cell` is the start vertex's cell and
+  // `entry` the index of that vertex).
+  template <typename Visit>
+  void WalkLoop(const internal::Point& p, const internal::Point& target, internal::CellHandle cell,
+                int entry, bool first, double stop, Visit& visit) const;
 
   internal::CellHandle CellOf(const CellKey& key) const;
   CellKey KeyOf(internal::CellHandle c) const;
@@ -131,7 +148,43 @@ void DelaunayMesh::Impl::Walk(internal::VertexHandle from, const internal::Point
     }
   }
   if (cell == CellHandle()) return;  // only infinite cells ahead: the target is off the hull
-  bool first = true;
+  WalkLoop(p, target, cell, entry, /*first=*/true, stop, visit);
+}
+
+inline int DelaunayMesh::Impl::EntryFacet(const internal::Point& from,
+                                          const internal::Point& target,
+                                          internal::CellHandle c) const {
+  if (tri.is_infinite(c)) return -1;
+  const std::array<const internal::Point*, 4> v = {&c->vertex(0)->point(), &c->vertex(1)->point(),
+                                                   &c->vertex(2)->point(), &c->vertex(3)->point()};
+  for (int k = 0; k < 4; ++k) {
+    std::array<const internal::Point*, 4> q = v;
+    q[k] = &from;
+    if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) != CGAL::NEGATIVE) continue;
+    q[k] = &target;
+    if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) != CGAL::POSITIVE) return -1;
+    const int a = (k + 1) & 3, b = (k + 2) & 3, d = (k + 3) & 3;
+    const auto o1 = CGAL::orientation(from, target, *v[a], *v[b]);
+    const auto o2 = CGAL::orientation(from, target, *v[b], *v[d]);
+    const auto o3 = CGAL::orientation(from, target, *v[d], *v[a]);
+    if (o1 != CGAL::ZERO && o1 == o2 && o2 == o3) return k;
+    return -1;  // the line misses the open triangle (or touches its border)
+  }
+  return -1;
+}
+
+template <typename Visit>
+void DelaunayMesh::Impl::WalkFrom(const internal::Point& from, const internal::Point& target,
+                                  internal::CellHandle start, int entry, double stop,
+                                  Visit&& visit) const {
+  WalkLoop(from, target, start, entry, /*first=*/false, stop, visit);
+}
+
+template <typename Visit>
+void DelaunayMesh::Impl::WalkLoop(const internal::Point& p, const internal::Point& target,
+                                  internal::CellHandle cell, int entry, bool first, double stop,
+                                  Visit& visit) const {
+  using internal::CellHandle;
   // Direction scaled so that the projection of a point is its parameter along from→target.
   double dir[3] = {target.x() - p.x(), target.y() - p.y(), target.z() - p.z()};
   const double norm2 = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <random>
@@ -204,6 +205,64 @@ TEST(IncrementalSculptor, ClippedOldRaysGiveTheSameSculpture) {
   EXPECT_GT(old_rays, 0u);
   EXPECT_EQ(meshes[0].triangles, meshes[1].triangles);
   EXPECT_EQ(meshes[0].vertices, meshes[1].vertices);
+}
+
+// The optimised re-tracing of old rays (each segment clipped to where it can meet a new cell,
+// the walk started at a located cell inside the segment) gives exactly the per-cell counters
+// of the straightforward walk of every selected old ray from its point, after every keyframe of
+// a random stream (points scattered in a box, rays to random earlier keyframes).
+TEST(IncrementalSculptor, OptimisedOldRayTracingGivesTheSameCountersOnARandomStream) {
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<SurfaceKeyframe> stream;
+  uint32_t next_point = 0;
+  for (int t = 0; t < 16; ++t) {
+    SurfaceKeyframe kf;
+    kf.id = KeyframeId(t);
+    kf.centre = Eigen::Vector3d(t + 0.3 * u(rng), 0.5 * u(rng), 1.5 + 0.5 * u(rng));
+    for (int i = 0; i < 60; ++i) {
+      SurfacePoint p;
+      p.id = PointId(next_point++);
+      p.position =
+          kf.centre + Eigen::Vector3d(12.0 * u(rng) - 4.0, 16.0 * u(rng) - 8.0, 6.0 * u(rng) - 1.5);
+      for (int k = std::max(0, t - 6); k < t; ++k) {
+        if (u(rng) < 0.4) p.rays.push_back({KeyframeId(k), stream[k].centre});
+      }
+      p.rays.push_back({kf.id, kf.centre});
+      kf.points.push_back(p);
+    }
+    stream.push_back(kf);
+  }
+  SculptorOptions options;
+  options.scale = 1.0;
+  options.filter_points = false;
+  options.clip_old_rays = false;
+  IncrementalSculptor plain(options);
+  options.clip_old_rays = true;
+  options.locate_old_ray_start = true;
+  IncrementalSculptor clipped(options);
+  size_t old_rays = 0, compared = 0;
+  for (const SurfaceKeyframe& kf : stream) {
+    const std::vector<KeyframeStats> a = plain.AddKeyframe(kf), b = clipped.AddKeyframe(kf);
+    ASSERT_EQ(a.size(), 1u);
+    ASSERT_EQ(b.size(), 1u);
+    EXPECT_EQ(a[0].rays_old, b[0].rays_old);
+    old_rays += a[0].rays_old;
+    std::vector<CellKey> cells = plain.triangulation().FiniteCells();
+    std::vector<CellKey> cells_clipped = clipped.triangulation().FiniteCells();
+    std::sort(cells.begin(), cells.end());
+    std::sort(cells_clipped.begin(), cells_clipped.end());
+    ASSERT_EQ(cells, cells_clipped) << "keyframe " << kf.id.value;
+    for (const CellKey& c : cells) {
+      ASSERT_EQ(plain.triangulation().Counter(c), clipped.triangulation().Counter(c))
+          << "keyframe " << kf.id.value;
+      compared += plain.triangulation().Counter(c) > 0 ? 1 : 0;
+    }
+    EXPECT_EQ(a[0].cells_o, b[0].cells_o);
+    EXPECT_EQ(a[0].triangles, b[0].triangles);
+  }
+  EXPECT_GT(old_rays, 1000u);
+  EXPECT_GT(compared, 1000u);
 }
 
 // Paper §5.1 filters, with s = 1: below the ground by more than 3 s, farther than 15 s from the

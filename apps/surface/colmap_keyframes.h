@@ -1,0 +1,19 @@
+#pragma once
+// The keyframe stream of DESIGN.md §4 from a COLMAP text model (cameras.txt, images.txt,
+// points3D.txt), for `omnisculpt surface --colmap` (issue 6). Images whose names share a frame
+// (the same file name in different folders, e.g. "cam0/000123.png" and "cam1/000123.png") form
+// one keyframe, a rig frame; otherwise every image is a keyframe. Keyframes are ordered by
+// frame name. A point goes to the latest keyframe of its track (paper §3.3: observed by
+// keyframes t' ≤ t) with one ray per observing image, starting at that camera's centre.
+
+#include <filesystem>
+#include <vector>
+
+#include "surface/sculptor.h"
+
+namespace omni {
+
+// Throws InputError when a file is missing or malformed.
+std::vector<SurfaceKeyframe> LoadColmapKeyframes(const std::filesystem::path& model);
+
+}  // namespace omni

@@ -12,38 +12,17 @@
 #include <vector>
 
 #include "calib/rig_io.h"
+#include "tests/apps/run_omnisculpt.h"
 
 namespace omni {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-};
+using testing::CommandResult;
+using RunResult = CommandResult;
 
-std::string ReadFile(const fs::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  std::ostringstream text;
-  text << stream.rdbuf();
-  return text.str();
-}
-
-std::string Quote(const std::string& argument) {
-  std::string quoted = "'";
-  for (char c : argument) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return quoted + "'";
-}
-
-std::vector<std::string> Lines(const std::string& text) {
-  std::vector<std::string> lines;
-  std::istringstream stream(text);
-  std::string line;
-  while (std::getline(stream, line)) lines.push_back(line);
-  return lines;
-}
+std::vector<std::string> Lines(const std::string& text) { return testing::SplitText(text); }
 
 class CliTest : public ::testing::Test {
  protected:
@@ -56,17 +35,7 @@ class CliTest : public ::testing::Test {
   void TearDown() override { fs::remove_all(dir_); }
 
   RunResult Run(const std::vector<std::string>& arguments) {
-    std::string command = Quote(OMNI_EXECUTABLE);
-    for (const std::string& argument : arguments) command += " " + Quote(argument);
-    const fs::path out = dir_ / "stdout.txt";
-    const fs::path err = dir_ / "stderr.txt";
-    command += " >" + Quote(out.string()) + " 2>" + Quote(err.string()) + " </dev/null";
-    const int status = std::system(command.c_str());
-    RunResult result;
-    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    result.out = ReadFile(out);
-    result.err = ReadFile(err);
-    return result;
+    return testing::RunOmnisculpt(arguments, dir_);
   }
 
   fs::path Write(const std::string& name, const std::string& text) {
@@ -169,7 +138,7 @@ TEST_F(CliTest, ImportDoesNotOverwriteWithoutForce) {
   EXPECT_EQ(refused.exit_code, 2);
   EXPECT_EQ(Lines(refused.err).size(), 1u) << refused.err;
   EXPECT_NE(refused.err.find("--force"), std::string::npos) << refused.err;
-  EXPECT_EQ(ReadFile(out), "do not overwrite\n");
+  EXPECT_EQ(testing::ReadTextFile(out), "do not overwrite\n");
 
   const RunResult forced = Run({"calib", "import", "--format", "ladybug", conf.string(), "--out",
                                 out.string(), "--force", "--upright"});

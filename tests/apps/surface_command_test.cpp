@@ -20,37 +20,18 @@
 #include "apps/eval/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
+#include "tests/apps/run_omnisculpt.h"
 
 namespace omni {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-};
-
-std::string ReadFile(const fs::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  std::ostringstream text;
-  text << stream.rdbuf();
-  return text.str();
-}
-
-std::string Quote(const std::string& argument) {
-  std::string quoted = "'";
-  for (char c : argument) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return quoted + "'";
-}
+using RunResult = testing::CommandResult;
+using testing::ReadTextFile;
 
 std::vector<std::string> Split(const std::string& text, char separator) {
-  std::vector<std::string> parts;
-  std::istringstream stream(text);
-  std::string part;
-  while (std::getline(stream, part, separator)) parts.push_back(part);
-  return parts;
+  return testing::SplitText(text, separator);
 }
 
 class SurfaceCommandTest : public ::testing::Test {
@@ -68,17 +49,7 @@ class SurfaceCommandTest : public ::testing::Test {
   }
 
   static RunResult Run(const std::vector<std::string>& arguments) {
-    std::string command = Quote(OMNI_EXECUTABLE);
-    for (const std::string& argument : arguments) command += " " + Quote(argument);
-    const fs::path out = *dir_ / "stdout.txt";
-    const fs::path err = *dir_ / "stderr.txt";
-    command += " >" + Quote(out.string()) + " 2>" + Quote(err.string()) + " </dev/null";
-    const int status = std::system(command.c_str());
-    RunResult result;
-    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    result.out = ReadFile(out);
-    result.err = ReadFile(err);
-    return result;
+    return testing::RunOmnisculpt(arguments, *dir_);
   }
 
   static fs::path* dir_;
@@ -117,7 +88,7 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
   EXPECT_TRUE(report.oriented);
   EXPECT_EQ(report.boundary_edges, 0);
 
-  const std::vector<std::string> lines = Split(ReadFile(out / "stats" / "keyframes.csv"), '\n');
+  const std::vector<std::string> lines = Split(ReadTextFile(out / "stats" / "keyframes.csv"), '\n');
   ASSERT_FALSE(lines.empty());
   EXPECT_EQ(lines[0], kColumns);
   const std::vector<std::string> columns = Split(kColumns, ',');

@@ -28,6 +28,7 @@
 #include "calib/ply.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
+#include "tests/apps/run_omnisculpt.h"
 
 namespace omni::synth {
 namespace {
@@ -277,21 +278,8 @@ TEST_F(TinyDriveTest, PosesAreWrittenAndTheLoopCloses) {
   }
 }
 
-struct RunResult {
-  int exit_code = -1;
-  std::string err;
-};
-
-RunResult RunOmnisculpt(const std::string& arguments, const fs::path& folder) {
-  const fs::path err = folder / "stderr.txt";
-  const std::string command = std::string("'") + OMNI_EXECUTABLE + "' " + arguments +
-                              " >/dev/null 2>'" + err.string() + "'";
-  const int status = std::system(command.c_str());
-  RunResult result;
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  result.err = ReadBytes(err);
-  return result;
-}
+using testing::CommandResult;
+using testing::RunOmnisculpt;
 
 int CountLines(const std::string& text) {
   return static_cast<int>(std::count(text.begin(), text.end(), '\n'));
@@ -300,8 +288,8 @@ int CountLines(const std::string& text) {
 TEST(SynthCommandTest, BadPresetAndUnwritableOutputAreOneLineErrors) {
   const fs::path folder = TempFolder("cli");
   fs::create_directories(folder);
-  RunResult result =
-      RunOmnisculpt("synth --preset nope --out '" + (folder / "d").string() + "'", folder);
+  CommandResult result =
+      RunOmnisculpt({"synth", "--preset", "nope", "--out", (folder / "d").string()}, folder);
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_EQ(CountLines(result.err), 1) << result.err;
   EXPECT_NE(result.err.find("tiny, demo, paper"), std::string::npos) << result.err;
@@ -309,13 +297,13 @@ TEST(SynthCommandTest, BadPresetAndUnwritableOutputAreOneLineErrors) {
 
   std::ofstream(folder / "file") << "a file, not a folder";
   result = RunOmnisculpt(
-      "synth --preset tiny --frames 2 --out '" + (folder / "file" / "drive").string() + "'",
+      {"synth", "--preset", "tiny", "--frames", "2", "--out", (folder / "file" / "drive").string()},
       folder);
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_EQ(CountLines(result.err), 1) << result.err;
   EXPECT_NE(result.err.find("--out"), std::string::npos) << result.err;
 
-  result = RunOmnisculpt("synth --list-presets", folder);
+  result = RunOmnisculpt({"synth", "--list-presets"}, folder);
   EXPECT_EQ(result.exit_code, 0);
   fs::remove_all(folder);
 }

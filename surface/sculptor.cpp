@@ -275,6 +275,18 @@ struct RayTask {
   CellHandle hint;
 };
 
+// The kept points of a keyframe with their CGAL positions, in CGAL's spatial sort order, so
+// that each insertion is located from the previous one.
+std::vector<std::pair<Point, const SurfacePoint*>> SpatiallySorted(
+    const std::vector<const SurfacePoint*>& points) {
+  std::vector<std::pair<Point, const SurfacePoint*>> sorted;
+  for (const SurfacePoint* p : points) sorted.emplace_back(ToCgal(p->position), p);
+  using PairMap = CGAL::First_of_pair_property_map<std::pair<Point, const SurfacePoint*>>;
+  CGAL::spatial_sort(sorted.begin(), sorted.end(),
+                     CGAL::Spatial_sort_traits_adapter_3<internal::Kernel, PairMap>());
+  return sorted;
+}
+
 }  // namespace
 
 struct IncrementalSculptor::Impl {
@@ -778,11 +790,7 @@ struct IncrementalSculptor::Impl {
     KeyframeRecord rec;
     rec.id = kf.id;
     rec.centre = kf.centre;
-    std::vector<std::pair<Point, const SurfacePoint*>> sorted;
-    for (const SurfacePoint* p : kept) sorted.emplace_back(ToCgal(p->position), p);
-    using PairMap = CGAL::First_of_pair_property_map<std::pair<Point, const SurfacePoint*>>;
-    CGAL::spatial_sort(sorted.begin(), sorted.end(),
-                       CGAL::Spatial_sort_traits_adapter_3<internal::Kernel, PairMap>());
+    const auto sorted = SpatiallySorted(kept);
     CellHandle hint = t.tri.locate(ToCgal(kf.centre));
     for (const auto& [pt, p] : sorted) {
       bool duplicate;
@@ -888,11 +896,7 @@ struct IncrementalSculptor::Impl {
       rec.id = kf.id;
       rec.centre = kf.centre;
       const auto kept = Filter(kf, st);
-      std::vector<std::pair<Point, const SurfacePoint*>> sorted;
-      for (const SurfacePoint* p : kept) sorted.emplace_back(ToCgal(p->position), p);
-      using PairMap = CGAL::First_of_pair_property_map<std::pair<Point, const SurfacePoint*>>;
-      CGAL::spatial_sort(sorted.begin(), sorted.end(),
-                         CGAL::Spatial_sort_traits_adapter_3<internal::Kernel, PairMap>());
+      const auto sorted = SpatiallySorted(kept);
       CellHandle hint = t.tri.locate(ToCgal(kf.centre));
       for (const auto& [pt, p] : sorted) {
         bool duplicate;

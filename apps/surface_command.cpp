@@ -15,10 +15,10 @@
 #include "apps/commands.h"
 #include "apps/surface/colmap_keyframes.h"
 #include "apps/surface/gt_keyframes.h"
-#include "calib/tum.h"
 #include "calib/atomic_file.h"
 #include "calib/error.h"
 #include "calib/ply.h"
+#include "calib/tum.h"
 #include "surface/manifold_check.h"
 #include "surface/sculptor.h"
 
@@ -31,6 +31,8 @@ struct SurfaceCommandOptions {
   std::string out;
   std::string enclosing = "ball";
   bool no_batch = false;
+  bool no_genus_refinement = false;  // step 6 (paper §4.6) parts switched off
+  bool no_smoothing = false;
   int snapshot_every = 0;  // write OUT/snapshots/surface_<keyframe>.ply every K keyframes; 0: none
   GtKeyframeOptions gt;
   SculptorOptions sculptor;
@@ -55,6 +57,8 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     throw InputError("", "--enclosing", "expected ball or conflict, got '" + o.enclosing + "'");
   }
   o.sculptor.batch_init = !o.no_batch;
+  if (o.no_genus_refinement) o.sculptor.genus.enabled = false;
+  if (o.no_smoothing) o.sculptor.smoothing.enabled = false;
   if (o.snapshot_every < 0) throw InputError("", "--snapshot-every", "must be >= 0");
   for (const std::string& problem : {o.sculptor.Check(), o.gt.Check()}) {
     if (!problem.empty()) throw InputError("", "options", problem);
@@ -152,13 +156,20 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
   command->add_option("--colmap", o->colmap,
                       "COLMAP text model folder (cameras.txt, images.txt, points3D.txt); images "
                       "sharing a file name in different folders form one rig keyframe");
-  command->add_option("--out", o->out, "Output folder (surface.ply, points.ply, poses.tum with --from-gt, stats/keyframes.csv)");
+  command->add_option(
+      "--out", o->out,
+      "Output folder (surface.ply, points.ply, poses.tum with --from-gt, stats/keyframes.csv)");
   command
       ->add_option("--enclosing", o->enclosing,
                    "Enclosing set E: ball (paper §4.1) | conflict (conflict zones + margin)")
       ->capture_default_str();
   command->add_flag("--no-batch", o->no_batch,
                     "Sculpt the first keyframes one by one instead of in one batch (§5.1)");
+  command->add_flag("--no-genus-refinement", o->no_genus_refinement,
+                    "Skip the genus refinement of step 6 (paper §4.6)");
+  command->add_flag("--no-smoothing", o->no_smoothing,
+                    "Skip the incremental smoothing of step 6 (paper §4.6): the surface keeps "
+                    "the Delaunay vertices' positions");
   command
       ->add_option("--init-keyframes", o->sculptor.init_keyframes,
                    "Keyframes measuring s (and sculpted in batch), paper §5.1")
@@ -170,6 +181,14 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
   command->add_option("--max-keyframes", o->gt.max_keyframes, "0: the whole drive")
       ->capture_default_str();
   command->add_option("--point-noise", o->gt.point_noise, "Gaussian noise on points, metres")
+      ->capture_default_str();
+  command
+      ->add_option("--pose-noise", o->gt.pose_noise,
+                   "Gaussian noise on the keyframe centres and their rays' origins, metres")
+      ->capture_default_str();
+  command
+      ->add_option("--pose-noise-deg", o->gt.pose_noise_deg,
+                   "Gaussian noise on the keyframe orientations written to poses.tum, degrees")
       ->capture_default_str();
   command
       ->add_option("--snapshot-every", o->snapshot_every,

@@ -16,6 +16,8 @@
 #include <unordered_set>
 
 #include "surface/internal/cgal_delaunay.h"
+#include "surface/internal/old_rays.h"
+#include "surface/internal/step6.h"
 
 namespace omni {
 
@@ -40,6 +42,10 @@ std::string SculptorOptions::Check() const {
   if (init_keyframes < 1) return "init_keyframes must be >= 1";
   if (max_vertex_passes < 0) return "max_vertex_passes must be >= 0";
   if (enclosing_margin < 0) return "enclosing_margin must be >= 0";
+  if (!(ray_grid_step_factor > 0.0)) return "ray_grid_step_factor must be > 0";
+  for (const std::string& problem : {genus.Check(), smoothing.Check()}) {
+    if (!problem.empty()) return problem;
+  }
   return "";
 }
 
@@ -47,7 +53,9 @@ std::string KeyframeStatsCsvHeader() {
   return "keyframe,batch,points_in,points_filtered,points_added,points_rejected,"
          "points_duplicate,steiner_added,rays_new,rays_old,cells_e,cells_n,o_left_in_e,cells_t,"
          "cells_f,cells_o,triangles,ms_steiner,ms_enclose,ms_shrink,ms_insert,ms_rays,ms_grow,"
-         "ms_total";
+         "ms_total,genus_free_before,genus_free_after,genus_groups,genus_euler_change,"
+         "smoothed_vertices,smoothing_rejected,ms_genus,ms_smooth,rays_old_candidates,"
+         "old_walk_cells,ms_rays_select,ms_rays_old";
 }
 
 std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
@@ -58,7 +66,11 @@ std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
     << s.cells_e << ',' << s.cells_n << ',' << s.o_left_in_e << ',' << s.cells_t << ',' << s.cells_f
     << ',' << s.cells_o << ',' << s.triangles << ',' << s.ms_steiner << ',' << s.ms_enclose << ','
     << s.ms_shrink << ',' << s.ms_insert << ',' << s.ms_rays << ',' << s.ms_grow << ','
-    << s.ms_total;
+    << s.ms_total << ',' << s.genus_free_before << ',' << s.genus_free_after << ','
+    << s.genus_groups << ',' << s.genus_euler_change << ',' << s.smoothed_vertices << ','
+    << s.smoothing_rejected << ',' << s.ms_genus << ',' << s.ms_smooth << ','
+    << s.rays_old_candidates << ',' << s.old_walk_cells << ',' << s.ms_rays_select << ','
+    << s.ms_rays_old;
   return o.str();
 }
 
@@ -68,160 +80,6 @@ using Clock = std::chrono::steady_clock;
 double MsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
-
-// Whether the segment a→b meets the box; *exit (*entry): the largest (smallest) parameter
-// (a + t (b − a)) inside.
-bool SegmentHitsBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                    const Eigen::AlignedBox3d& box, double* exit = nullptr,
-                    double* entry = nullptr) {
-  double lo = 0.0, hi = 1.0;
-  const Eigen::Vector3d d = b - a;
-  for (int k = 0; k < 3; ++k) {
-    if (std::abs(d[k]) < 1e-300) {
-      if (a[k] < box.min()[k] || a[k] > box.max()[k]) return false;
-      continue;
-    }
-    double t0 = (box.min()[k] - a[k]) / d[k], t1 = (box.max()[k] - a[k]) / d[k];
-    if (t0 > t1) std::swap(t0, t1);
-    lo = std::max(lo, t0);
-    hi = std::min(hi, t1);
-    if (lo > hi) return false;
-  }
-  if (exit) *exit = hi;
-  if (entry) *entry = lo;
-  return true;
-}
-
-// Boxes (of the new cells N) in a hash grid, to find the old rays that can cross N (§4.4, with
-// one box per new cell instead of the single X_N). Conservative: boxes are registered in the
-// voxels they overlap grown by one voxel, and a segment is sampled every half voxel.
-class BoxIndex {
- public:
-  explicit BoxIndex(double voxel) : voxel_(voxel) {}
-
-  void Add(const Eigen::AlignedBox3d& box) {
-    const int id = static_cast<int>(boxes_.size());
-    boxes_.push_back(box);
-    bounds_.extend(box);
-    const Eigen::Vector3i lo = Voxel(box.min()) - Eigen::Vector3i::Ones();
-    const Eigen::Vector3i hi = Voxel(box.max()) + Eigen::Vector3i::Ones();
-    if ((hi - lo).maxCoeff() > kMaxSpan) {
-      large_.push_back(id);
-      return;
-    }
-    for (int i = lo.x(); i <= hi.x(); ++i) {
-      for (int j = lo.y(); j <= hi.y(); ++j) {
-        for (int k = lo.z(); k <= hi.z(); ++k) grid_[Key(Eigen::Vector3i(i, j, k))].push_back(id);
-      }
-    }
-  }
-  const Eigen::AlignedBox3d& bounds() const { return bounds_; }
-
-  // An upper bound of the parameter t (a + t (b − a)) beyond which the segment is in no box,
-  // or −1 when it meets none. Scans the samples from b: a box met by the segment ending at t_e
-  // has a sample within half a voxel of t_e in one of its (grown) voxels, so the first sample
-  // from b with a hit is at t_f ≥ t_e − voxel/length.
-  double LastHit(const Eigen::Vector3d& a, const Eigen::Vector3d& b) const {
-    if (!SegmentHitsBox(a, b, bounds_)) return -1.0;
-    double last = -1.0, exit;
-    for (int id : large_) {
-      if (SegmentHitsBox(a, b, boxes_[id], &exit)) last = std::max(last, exit);
-    }
-    const double length = (b - a).norm();
-    const int samples = static_cast<int>(std::ceil(length / (0.5 * voxel_))) + 1;
-    uint64_t previous = ~uint64_t{0};
-    for (int n = samples; n >= 0; --n) {
-      const double t = static_cast<double>(n) / samples;
-      const uint64_t key = Key(Voxel(a + (b - a) * t));
-      if (key == previous) continue;
-      previous = key;
-      const auto it = grid_.find(key);
-      if (it == grid_.end()) continue;
-      bool found = false;
-      for (int id : it->second) {
-        if (SegmentHitsBox(a, b, boxes_[id], &exit)) {
-          found = true;
-          last = std::max(last, exit);
-        }
-      }
-      if (found) return std::max(last, std::min(1.0, t + voxel_ / std::max(length, 1e-300)));
-    }
-    return last;
-  }
-
-  // Bounds [*first, *last] of the parameters (a + t (b − a)) where the segment a→b can be in a
-  // box: false when it meets none. *box: a box met at the voxel of *first (a hint). Scans the
-  // samples from a, then from b, each scan stopping at the first voxel with a box met: a box met
-  // from t_e on has a sample within half a voxel of t_e in one of its (grown) voxels, so the
-  // first sample from a with a hit is at t_f ≤ t_e + voxel/length (mirrored from b). Each box
-  // is tested at most once per scan however many voxels it was registered in.
-  bool HitRange(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double* first, double* last,
-                int* box) const {
-    *first = 2.0;
-    *last = -1.0;
-    *box = -1;
-    if (!SegmentHitsBox(a, b, bounds_)) return false;
-    thread_local std::vector<uint32_t> tested;  // per box: the scan stamp that tested it
-    thread_local uint32_t scan = 0;
-    thread_local const BoxIndex* owner = nullptr;
-    if (owner != this || tested.size() != boxes_.size() || scan > 0xfffffff0u) {
-      owner = this;
-      tested.assign(boxes_.size(), 0);
-      scan = 0;
-    }
-    const double length = (b - a).norm();
-    const double slack = voxel_ / std::max(length, 1e-300);
-    const int samples = static_cast<int>(std::ceil(length / (0.5 * voxel_))) + 1;
-    double entry, exit;
-    for (int direction = 0; direction < 2; ++direction) {
-      const bool forward = direction == 0;
-      ++scan;
-      bool found = false;
-      auto consider = [&](int id) {
-        if (tested[id] == scan) return;
-        tested[id] = scan;
-        if (!SegmentHitsBox(a, b, boxes_[id], &exit, &entry)) return;
-        found = true;
-        if (forward && entry < *first) *first = entry, *box = id;
-        if (!forward) *last = std::max(*last, exit);
-      };
-      for (int id : large_) consider(id);
-      uint64_t previous = ~uint64_t{0};
-      for (int n = 0; n <= samples; ++n) {
-        const double t = static_cast<double>(forward ? n : samples - n) / samples;
-        const uint64_t key = Key(Voxel(a + (b - a) * t));
-        if (key == previous) continue;
-        previous = key;
-        const auto it = grid_.find(key);
-        if (it == grid_.end()) continue;
-        for (int id : it->second) consider(id);
-        if (found) {
-          if (forward) *first = std::min(*first, std::max(0.0, t - slack));
-          if (!forward) *last = std::max(*last, std::min(1.0, t + slack));
-          break;
-        }
-      }
-      if (!found) return false;
-    }
-    return true;
-  }
-
- private:
-  static constexpr int kMaxSpan = 8;
-  Eigen::Vector3i Voxel(const Eigen::Vector3d& p) const {
-    return (p / voxel_).array().floor().cast<int>();
-  }
-  static uint64_t Key(const Eigen::Vector3i& v) {
-    constexpr int64_t kOff = 1 << 20;
-    return (static_cast<uint64_t>(v.x() + kOff) << 42) |
-           (static_cast<uint64_t>(v.y() + kOff) << 21) | static_cast<uint64_t>(v.z() + kOff);
-  }
-  double voxel_;
-  std::vector<Eigen::AlignedBox3d> boxes_;
-  std::vector<int> large_;
-  Eigen::AlignedBox3d bounds_;
-  std::unordered_map<uint64_t, std::vector<int>> grid_;
-};
 
 // Cells by ray counter (smallest or largest first), ties in push order so that runs are
 // reproducible (cell addresses are not).
@@ -255,13 +113,14 @@ class CellQueue {
 struct PointRecord {
   VertexHandle vertex;
   std::vector<Eigen::Vector3d> origins;
+  uint32_t first_ray = 0;  // the rays of the point are first_ray, first_ray + 1, ... (ray ids)
+  uint32_t n_stamp = 0;    // equal to the current stamp when the vertex is a vertex of N
 };
 
 struct KeyframeRecord {
   KeyframeId id;
   Eigen::Vector3d centre;
-  Eigen::AlignedBox3d ray_box;  // X_t of §4.4: bounding box of the rays of its points
-  std::vector<int> points;      // indices in Impl::points
+  std::vector<int> points;  // indices in Impl::points
 };
 
 struct RayTask {
@@ -269,10 +128,6 @@ struct RayTask {
   VertexHandle from;
   Point target;
   double stop = 2.0;  // the walk may stop once past this parameter along from→target
-  // The walk may start at the cell holding from + start (target − from), located from `hint`
-  // (0: from the vertex). Only for rays that count the new cells alone (§4.4).
-  double start = 0.0;
-  CellHandle hint;
 };
 
 // The kept points of a keyframe with their CGAL positions, in CGAL's spatial sort order, so
@@ -303,6 +158,13 @@ struct IncrementalSculptor::Impl {
   std::vector<KeyframeRecord> keyframes;
   uint32_t stamp = 0;  // processing index of the current keyframe (the creation date)
   std::vector<VertexHandle> new_vertices;  // inserted during the current keyframe
+  internal::SurfaceSmoother smoother;      // step 6: smoothed δO positions
+  // Old rays (§4.4): the point of each ray id, the rays traced so far in their voxels (ids
+  // below num_registered_rays), and a per-ray scratch stamp.
+  std::vector<uint32_t> ray_point;
+  internal::RayGrid ray_grid;
+  uint32_t num_registered_rays = 0;
+  std::vector<uint32_t> ray_seen;
 
   explicit Impl(const SculptorOptions& o) : options(o), t(*mesh.impl()) {}
 
@@ -330,6 +192,7 @@ struct IncrementalSculptor::Impl {
       return;
     }
     step = options.steiner_step_factor * s;
+    ray_grid = internal::RayGrid(options.ray_grid_step_factor * s);
     l = step * std::sqrt(3.0);
     r = options.max_ray_length_factor * s;
     // Shift the grid off round coordinates so that grid planes do not contain the (often
@@ -642,10 +505,16 @@ struct IncrementalSculptor::Impl {
     } else {
       GrowOneAtOnce(seeds, false);
     }
-    std::vector<CellHandle> star;
+    std::vector<CellHandle> star, free;
     for (int pass = 0; pass < options.max_vertex_passes; ++pass) {
       bool progress = false;
-      for (const VertexHandle& v : VerticesOf(active)) {
+      // Only a vertex of a cell of F \ O can have cells to add, and F does not change while O
+      // grows: the vertices of the other active cells would all be skipped below.
+      free.clear();
+      for (const CellHandle& c : active) {
+        if (!c->info().in_o && c->info().counter > 0) free.push_back(c);
+      }
+      for (const VertexHandle& v : VerticesOf(free)) {
         if (!t.VertexOnSurface(v)) continue;
         star.clear();
         t.tri.incident_cells(v, std::back_inserter(star));
@@ -677,13 +546,15 @@ struct IncrementalSculptor::Impl {
 
   // ---- Ray tracing (§4.4) ----
   // Traces the tasks in parallel; only_new: increment only the cells created in this keyframe.
-  void Trace(const std::vector<RayTask>& tasks, bool only_new) {
-    std::atomic<size_t> became_free{0};
+  // Returns the number of cells the walks visited.
+  size_t Trace(const std::vector<RayTask>& tasks, bool only_new) {
+    std::atomic<size_t> became_free{0}, visited{0};
     const uint32_t date = stamp;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, tasks.size(), 64),
                       [&](const tbb::blocked_range<size_t>& range) {
-                        size_t local = 0;
+                        size_t local = 0, cells = 0;
                         auto visit = [&](CellHandle c) {
+                          ++cells;
                           if (only_new && c->info().date != date) return;
                           if (!only_new)
                             __atomic_store_n(&c->info().ray_stamp, date, __ATOMIC_RELAXED);
@@ -693,29 +564,120 @@ struct IncrementalSculptor::Impl {
                         };
                         for (size_t i = range.begin(); i != range.end(); ++i) {
                           const RayTask& task = tasks[i];
-                          if (task.start > 0.0 && only_new) {
-                            // Start inside the segment, at the cell holding a point before
-                            // every new cell it can meet; exact when the segment enters that
-                            // cell cleanly (any walk of the segment then crosses it through
-                            // the same facet), otherwise the whole walk.
-                            const Point& a = task.from->point();
-                            const Point q(a.x() + task.start * (task.target.x() - a.x()),
-                                          a.y() + task.start * (task.target.y() - a.y()),
-                                          a.z() + task.start * (task.target.z() - a.z()));
-                            internal::Delaunay::Locate_type lt;
-                            int li, lj;
-                            const CellHandle c = t.tri.locate(q, lt, li, lj, task.hint);
-                            const int entry = t.EntryFacet(a, task.target, c);
-                            if (entry >= 0) {
-                              t.WalkFrom(a, task.target, c, entry, task.stop, visit);
-                              continue;
-                            }
-                          }
                           t.Walk(task.from, task.target, task.stop, visit);
                         }
                         became_free += local;
+                        visited += cells;
                       });
     t.num_f += became_free;
+    return visited;
+  }
+
+  // Puts the rays of the keyframe's points (traced) in the ray grid.
+  void RegisterRays(const KeyframeRecord& kf) {
+    for (int i : kf.points) {
+      const PointRecord& p = points[i];
+      const Eigen::Vector3d a = ToEigen(p.vertex->point());
+      for (size_t k = 0; k < p.origins.size(); ++k) {
+        ray_grid.Add(p.first_ray + static_cast<uint32_t>(k), a, p.origins[k]);
+      }
+      num_registered_rays = std::max<uint32_t>(
+          num_registered_rays, p.first_ray + static_cast<uint32_t>(p.origins.size()));
+    }
+  }
+
+  // Re-traces the old rays (those in the ray grid) over the new cells N (§4.4, see
+  // surface/internal/old_rays.h), incrementing only the counters of N cells.
+  void TraceOldRays(const std::vector<CellHandle>& n_cells, KeyframeStats& st) {
+    if (n_cells.empty() || num_registered_rays == 0) return;
+    const auto tick = Clock::now();
+    const uint32_t date = stamp;
+    std::vector<uint32_t> candidates;
+    std::unique_ptr<internal::NewCellBorder> border;
+    for (const CellHandle& c : n_cells) {
+      for (int i = 0; i < 4; ++i) {
+        const VertexHandle v = c->vertex(i);
+        if (t.tri.is_infinite(v) || v->info().point < 0) continue;
+        points[v->info().point].n_stamp = date;
+      }
+    }
+    if (options.old_rays == OldRayTracing::kAllRays) {
+      candidates.resize(num_registered_rays);
+      for (uint32_t id = 0; id < num_registered_rays; ++id) candidates[id] = id;
+    } else {
+      border = std::make_unique<internal::NewCellBorder>(t.tri, n_cells, date, ray_grid.grid());
+      ray_seen.resize(num_registered_rays, 0);
+      auto add = [&](uint32_t id) {
+        if (id < num_registered_rays && ray_seen[id] != date) {
+          ray_seen[id] = date;
+          candidates.push_back(id);
+        }
+      };
+      // Rays that may cross the border of N, and rays starting at a vertex of N.
+      for (uint64_t key : border->voxels()) {
+        if (const std::vector<uint32_t>* rays = ray_grid.RaysIn(key)) {
+          for (uint32_t id : *rays) add(id);
+        }
+      }
+      for (const CellHandle& c : n_cells) {
+        for (int i = 0; i < 4; ++i) {
+          const VertexHandle v = c->vertex(i);
+          if (t.tri.is_infinite(v) || v->info().point < 0) continue;
+          const PointRecord& p = points[v->info().point];
+          for (size_t k = 0; k < p.origins.size(); ++k) add(p.first_ray + static_cast<uint32_t>(k));
+        }
+      }
+      std::sort(candidates.begin(), candidates.end());  // rays of nearby points together
+    }
+    st.rays_old_candidates = candidates.size();
+    st.ms_rays_select = MsSince(tick);
+
+    const auto walk_tick = Clock::now();
+    const bool runs = options.old_rays == OldRayTracing::kNewCellRuns;
+    std::atomic<size_t> became_free{0}, visited{0}, traced{0};
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates.size(), 64),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                        size_t local_free = 0, cells = 0, rays = 0;
+                        auto increment = [&](CellHandle c) {
+                          if (__atomic_fetch_add(&c->info().counter, 1u, __ATOMIC_RELAXED) == 0)
+                            ++local_free;
+                        };
+                        // Whole walks count the N cells; runs end at the first cell out of N.
+                        auto count_new = [&](CellHandle c) {
+                          ++cells;
+                          if (c->info().date == date) increment(c);
+                        };
+                        auto run = [&](CellHandle c) {
+                          ++cells;
+                          if (c->info().date != date) return false;
+                          increment(c);
+                          return true;
+                        };
+                        std::vector<internal::CellFacet> entries;
+                        for (size_t i = range.begin(); i != range.end(); ++i) {
+                          const uint32_t id = candidates[i];
+                          const PointRecord& p = points[ray_point[id]];
+                          const Point target = ToCgal(p.origins[id - p.first_ray]);
+                          if (runs && border->Entries(p.vertex, target, &entries)) {
+                            const bool starts_in_n = p.n_stamp == date;
+                            if (starts_in_n) t.Walk(p.vertex, target, 2.0, run);
+                            for (const internal::CellFacet& e : entries) {
+                              t.WalkFrom(p.vertex->point(), target, e.first, e.second, 2.0, run);
+                            }
+                            rays += starts_in_n || !entries.empty() ? 1 : 0;
+                          } else {
+                            t.Walk(p.vertex, target, 2.0, count_new);
+                            ++rays;
+                          }
+                        }
+                        became_free += local_free;
+                        visited += cells;
+                        traced += rays;
+                      });
+    t.num_f += became_free;
+    st.rays_old = traced;
+    st.old_walk_cells = visited;
+    st.ms_rays_old = MsSince(walk_tick);
   }
 
   // The cells created in this keyframe: the stars of the vertices inserted in it.
@@ -744,11 +706,11 @@ struct IncrementalSculptor::Impl {
     v = t.AddVertex(v, static_cast<int32_t>(points.size()), false);
     PointRecord rec;
     rec.vertex = v;
+    rec.first_ray = static_cast<uint32_t>(ray_point.size());
     for (const SurfaceRay& ray : p.rays) {
       rec.origins.push_back(ray.origin);
-      kf.ray_box.extend(ray.origin);
+      ray_point.push_back(static_cast<uint32_t>(points.size()));
     }
-    kf.ray_box.extend(p.position);
     points.push_back(std::move(rec));
     kf.points.push_back(static_cast<int>(points.size()) - 1);
     return kf.points.back();
@@ -815,54 +777,8 @@ struct IncrementalSculptor::Impl {
     }
     st.rays_new = tasks.size();
     Trace(tasks, false);
-    tasks.clear();
-    if (!n_cells.empty()) {
-      BoxIndex index_n(2.0 * s);  // X_N, refined into one box per new cell (in n_cells order)
-      for (const CellHandle& c : n_cells) {
-        Eigen::AlignedBox3d box;
-        for (int i = 0; i < 4; ++i) box.extend(ToEigen(c->vertex(i)->point()));
-        index_n.Add(box);
-      }
-      std::vector<RayTask> candidates;
-      for (const KeyframeRecord& old : keyframes) {
-        if (!old.ray_box.intersects(index_n.bounds())) continue;
-        for (int i : old.points) {
-          for (const Eigen::Vector3d& o : points[i].origins) {
-            candidates.emplace_back(points[i].vertex, ToCgal(o));
-          }
-        }
-      }
-      std::vector<double> last(candidates.size(), -1.0);
-      const bool clip = options.clip_old_rays;
-      const bool locate_start = clip && options.locate_old_ray_start;
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates.size(), 256),
-                        [&](const tbb::blocked_range<size_t>& range) {
-                          for (size_t i = range.begin(); i != range.end(); ++i) {
-                            RayTask& task = candidates[i];
-                            const Eigen::Vector3d a = ToEigen(task.from->point());
-                            const Eigen::Vector3d b = ToEigen(task.target);
-                            last[i] = index_n.LastHit(a, b);
-                            if (!clip || last[i] < 0.0) continue;
-                            task.stop = last[i];
-                            if (!locate_start) continue;
-                            double first, exact_last;
-                            int box;
-                            if (!index_n.HitRange(a, b, &first, &exact_last, &box)) continue;
-                            // Start a margin before the first box, far above the rounding of
-                            // the located point.
-                            first -= 1e-7;
-                            if (first > 0.0) {
-                              task.start = first;
-                              task.hint = n_cells[box];
-                            }
-                          }
-                        });
-      for (size_t i = 0; i < candidates.size(); ++i) {
-        if (last[i] >= 0.0) tasks.push_back(candidates[i]);
-      }
-    }
-    st.rays_old = tasks.size();
-    Trace(tasks, true);
+    TraceOldRays(n_cells, st);
+    RegisterRays(rec);
     keyframes.push_back(std::move(rec));
     st.ms_rays = MsSince(tick);
 
@@ -870,8 +786,11 @@ struct IncrementalSculptor::Impl {
     tick = Clock::now();
     std::vector<CellHandle> ball;
     if (options.enclosing == EnclosingMode::kBall) ball = CellsInBall(kf.centre, r + l);
-    Grow(ActiveCells(n_cells, ball));
+    const std::vector<CellHandle> active = ActiveCells(n_cells, ball);
+    Grow(active);
     st.ms_grow = MsSince(tick);
+
+    PostProcess(active, kf.centre, r + l, st);  // step 6
 
     FinishStats(st);
     st.ms_total = MsSince(start);
@@ -925,13 +844,41 @@ struct IncrementalSculptor::Impl {
     }
     st.rays_new = tasks.size();
     Trace(tasks, false);
+    for (const KeyframeRecord& kf : keyframes) RegisterRays(kf);
     st.ms_rays = MsSince(tick);
     tick = Clock::now();
     Grow(all);
     st.ms_grow = MsSince(tick);
+    PostProcess(all, kfs.back().centre, std::numeric_limits<double>::infinity(), st);  // step 6
     FinishStats(st);
     st.ms_total = MsSince(start);
     return st;
+  }
+
+  // ---- Step 6 (§4.6): genus refinement and smoothing, in surface/genus_refinement.cpp and
+  // surface/smoothing.cpp (STEP6, issue 7) ----
+  void PostProcess(const std::vector<CellHandle>& active, const Eigen::Vector3d& centre,
+                   double radius, KeyframeStats& st) {
+    auto tick = Clock::now();
+    // With the conflict-zone E the next keyframe's shrinking cannot undo the handles opened
+    // here (measured on the street test: 2.1 % of the points rejected without, 5.9 % with), so
+    // the refinement needs the paper's ball.
+    GenusRefinementOptions genus_options = options.genus;
+    if (options.enclosing != EnclosingMode::kBall) genus_options.enabled = false;
+    const internal::GenusRefinementResult genus = internal::RefineGenus(
+        t, active, [this](CellHandle c) { return Active(c); }, genus_options);
+    st.genus_free_before = genus.free_before;
+    st.genus_free_after = genus.free_after;
+    st.genus_groups = genus.groups;
+    st.genus_euler_change = genus.euler_change;
+    st.ms_genus = MsSince(tick);
+    if (!options.smoothing.enabled) return;
+    tick = Clock::now();
+    const internal::SmoothingResult smoothing =
+        smoother.Update(t, active, centre, radius, options.smoothing);
+    st.smoothed_vertices = smoothing.vertices;
+    st.smoothing_rejected = smoothing.rejected;
+    st.ms_smooth = MsSince(tick);
   }
 
   std::vector<KeyframeStats> ProcessBuffered() {
@@ -973,7 +920,13 @@ std::vector<KeyframeStats> IncrementalSculptor::AddKeyframe(const SurfaceKeyfram
 
 std::vector<KeyframeStats> IncrementalSculptor::Finish() { return impl_->ProcessBuffered(); }
 
-TriangleMesh IncrementalSculptor::ExtractMesh() const { return impl_->mesh.ExtractSurface(); }
+TriangleMesh IncrementalSculptor::ExtractMesh() const {
+  if (impl_->options.smoothing.enabled) return impl_->smoother.Extract(impl_->t);  // step 6
+  return impl_->mesh.ExtractSurface();
+}
+Eigen::Vector3d IncrementalSculptor::SurfacePosition(int vertex) const {
+  return impl_->smoother.Position(impl_->t.vertices.at(vertex));
+}
 const DelaunayMesh& IncrementalSculptor::triangulation() const { return impl_->mesh; }
 double IncrementalSculptor::scale() const { return impl_->s; }
 size_t IncrementalSculptor::NumProcessedKeyframes() const { return impl_->keyframes.size(); }

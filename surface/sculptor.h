@@ -41,6 +41,55 @@ enum class EnclosingMode {
                    // points (found without inserting them) plus enclosing_margin rings of cells
 };
 
+// Step 6 of paper §4.6, first part: genus refinement ("handle removal", ref. [21]) of O ∩ E.
+// Groups of cells of F \ O are added to O at once while δO stays a 2-manifold (general test at
+// every vertex of the group, rolled back on failure), most crossed cells first: the cells around
+// an edge, then connected groups of F \ O. No Steiner point is added (T stays Delaunay, §4.6).
+struct GenusRefinementOptions {
+  bool enabled = true;       // with EnclosingMode::kBall only (see IncrementalSculptor's step 6)
+  bool edge_stars = true;    // try the F \ O cells around each edge at once
+  int max_group_cells = 32;  // largest connected group of F \ O cells tried at once (0: none)
+  std::string Check() const;
+};
+
+// Step 6 of paper §4.6, second part: incremental smoothing (ref. [20]) of the output surface. The
+// Delaunay vertices never move; smoothed positions of the δO vertices are kept beside T and
+// recomputed, in each keyframe, for the δO vertices whose umbrella changed and their neighbours,
+// inside the enclosing ball only: peak removal, then Taubin λ|μ steps of a feature-preserving
+// (bilateral) normal Laplacian. A move that turns an
+// incident triangle against its free side, or makes it meet a nearby δO triangle, is rejected.
+struct SmoothingOptions {
+  bool enabled = true;
+  int taubin_steps = 3;  // λ|μ pairs (Taubin, SIGGRAPH 1995: shrink-free low-pass smoothing)
+  double lambda = 0.5;
+  double mu = -0.53;
+  // A vertex farther from the plane of its umbrella than peak_factor times its mean edge length
+  // is a peak: moved to the centroid of its neighbours before the Taubin steps.
+  double peak_factor = 0.75;
+  // The Laplacian moves a vertex along its umbrella normal by the mean height of its neighbours
+  // over its tangent plane, each weighed by exp(−h²/2σ²) with σ = feature_sigma times its mean
+  // edge length: neighbours across a crease (a wall meeting the ground) barely pull.
+  double feature_sigma = 0.1;
+  // A vertex with an umbrella triangle turned more than this from the umbrella normal is on a
+  // crease or a corner: the Taubin steps leave it where it is. 180: off (30° froze most noisy
+  // vertices, whose sliver triangles turn far, and smoothed nothing on the test walls).
+  double crease_angle_deg = 180.0;
+  // Rejects a move that leaves an incident triangle with an area below this fraction of its
+  // squared longest edge (a near-degenerate triangle), besides flips.
+  double min_triangle_shape = 1e-4;
+  std::string Check() const;
+};
+
+// How the old rays are re-traced over the new cells N (paper §4.4). All modes give the same
+// counters; they differ in the rays and cells visited.
+enum class OldRayTracing {
+  kAllRays,      // every old ray, walked whole from its point (brute force, the reference)
+  kWholeWalks,   // the old rays in the voxels of a grid that N's border touches or starting at
+                 // a vertex of N, walked whole from their point
+  kNewCellRuns,  // the same rays, walked only inside N: from their point when it is a vertex
+                 // of N and from each clean crossing of N's border (whole walk otherwise)
+};
+
 struct SculptorOptions {
   // s, the mean distance between consecutive keyframe centres; 0: measured on the first
   // init_keyframes keyframes (paper §5.1).
@@ -62,17 +111,16 @@ struct SculptorOptions {
   bool batch_init = true;
   EnclosingMode enclosing = EnclosingMode::kBall;
   int enclosing_margin = 2;  // kConflictZones: rings of neighbouring cells added around D
-  // Stop re-traced old rays (§4.4) after the last point where they can meet a new cell, instead
-  // of walking them whole; the counters are the same either way.
-  bool clip_old_rays = true;
-  // With clip_old_rays, also start each re-traced old ray at the cell holding a point just
-  // before the first new cell's box it meets (located with CGAL from that cell) instead of at
-  // its point's vertex; exact (same counters), but measured slower on the street benchmark
-  // (locating costs more than the skipped part of these short walks), hence off.
-  bool locate_old_ray_start = false;
+  // Re-tracing of the old rays over the new cells N (§4.4); every mode gives the same counters.
+  OldRayTracing old_rays = OldRayTracing::kNewCellRuns;
+  // Voxel side of the grid that holds the old rays and the border of N, in units of s.
+  double ray_grid_step_factor = 1.0;
   // Several-at-once passes (paper §4.5, §4.7): at most this many sweeps over the vertices of
   // the enclosing set per keyframe.
   int max_vertex_passes = 4;
+  // Step 6 (paper §4.6).
+  GenusRefinementOptions genus;
+  SmoothingOptions smoothing;
 
   std::string Check() const;
 };
@@ -96,6 +144,18 @@ struct KeyframeStats {
   size_t triangles = 0;                          // triangles of δO
   double ms_steiner = 0, ms_enclose = 0, ms_shrink = 0, ms_insert = 0, ms_rays = 0, ms_grow = 0,
          ms_total = 0;
+  // Step 6 (paper §4.6). Genus refinement: cells of F ∩ E outside O before and after it, groups
+  // added, and the change of the Euler characteristic χ of δO it made (the genus change is
+  // −Δχ/2 when no component of δO was merged or closed by it).
+  size_t genus_free_before = 0, genus_free_after = 0, genus_groups = 0;
+  long genus_euler_change = 0;
+  // Smoothing: δO vertices recomputed, moves rejected (flip or local intersection).
+  size_t smoothed_vertices = 0, smoothing_rejected = 0;
+  double ms_genus = 0, ms_smooth = 0;
+  // Step 4 details (§4.4): old rays proposed by the ray index before the exact selection, cells
+  // visited by the re-traced old rays, and the milliseconds of the selection and of their walks.
+  size_t rays_old_candidates = 0, old_walk_cells = 0;
+  double ms_rays_select = 0, ms_rays_old = 0;
 };
 
 std::string KeyframeStatsCsvHeader();
@@ -112,8 +172,11 @@ class IncrementalSculptor {
   // Processes what is still buffered (a stream shorter than init_keyframes).
   std::vector<KeyframeStats> Finish();
 
-  // δO, triangles counter-clockwise seen from the free space.
+  // δO, triangles counter-clockwise seen from the free space; with smoothing, at the smoothed
+  // vertex positions.
   TriangleMesh ExtractMesh() const;
+  // The output position of the Delaunay vertex (DelaunayMesh index): smoothed, or its own.
+  Eigen::Vector3d SurfacePosition(int vertex) const;
   const DelaunayMesh& triangulation() const;
   double scale() const;  // s, 0 until known
   size_t NumProcessedKeyframes() const;

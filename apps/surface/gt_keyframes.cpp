@@ -2,6 +2,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -83,6 +84,8 @@ std::string GtKeyframeOptions::Check() const {
   if (max_observing_keyframes < 1) return "max_observing_keyframes must be >= 1";
   if (min_rays < 1) return "min_rays must be >= 1";
   if (!(point_noise >= 0)) return "point_noise must be >= 0";
+  if (!(pose_noise >= 0)) return "pose_noise must be >= 0";
+  if (!(pose_noise_deg >= 0)) return "pose_noise_deg must be >= 0";
   if (max_keyframes < 0) return "max_keyframes must be >= 0";
   return "";
 }
@@ -146,6 +149,20 @@ std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
     }
     stream.push_back(std::move(kf));
   }
+  if (options.pose_noise > 0) {
+    std::mt19937_64 pose_rng(options.seed ^ 0x9e3779b97f4a7c15ull);
+    std::vector<Eigen::Vector3d> shift(stream.size());
+    for (size_t t = 0; t < stream.size(); ++t) {
+      shift[t] =
+          options.pose_noise * Eigen::Vector3d(gauss(pose_rng), gauss(pose_rng), gauss(pose_rng));
+      stream[t].centre += shift[t];
+    }
+    for (SurfaceKeyframe& kf : stream) {
+      for (SurfacePoint& p : kf.points) {
+        for (SurfaceRay& ray : p.rays) ray.origin += shift[ray.keyframe.value];
+      }
+    }
+  }
   return stream;
 }
 
@@ -167,7 +184,21 @@ std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
   auto stream = MakeGtKeyframes(mesh, keyframe_centres, options);
   if (keyframe_poses) {
     keyframe_poses->clear();
-    for (size_t t = 0; t < stream.size(); ++t) keyframe_poses->push_back(poses[frames[t]]);
+    std::mt19937_64 rng(options.seed ^ 0x5851f42d4c957f2dull);
+    std::normal_distribution<double> gauss(0.0, options.pose_noise_deg * M_PI / 180.0);
+    for (size_t t = 0; t < stream.size(); ++t) {
+      StampedPose pose = poses[frames[t]];
+      if (options.pose_noise_deg > 0) {
+        const Eigen::Vector3d w(gauss(rng), gauss(rng), gauss(rng));
+        pose.world_from_rig.rotation =
+            (Eigen::Quaterniond(Eigen::AngleAxisd(w.norm(), w.normalized())) *
+             pose.world_from_rig.rotation)
+                .normalized();
+      }
+      // The rig centre at the (noisy) keyframe centre.
+      pose.world_from_rig.translation += stream[t].centre - pose.world_from_rig * centre_in_rig;
+      keyframe_poses->push_back(pose);
+    }
   }
   if (gt_mesh) *gt_mesh = std::move(mesh);
   return stream;

@@ -24,7 +24,13 @@ struct GtKeyframeOptions {
   int max_observing_keyframes = 12;  // earlier keyframes tried for the rays of a point
   int min_rays = 2;                  // points seen by fewer keyframes are not reconstructed
   double point_noise = 0.0;          // std. dev. of a Gaussian added to points, metres
-  int max_keyframes = 0;             // 0: the whole trajectory
+  // Pose noise of the simulated SfM (own seeded stream, so the points sampled do not change):
+  // each keyframe centre, and the origins of the rays from it, moved by a Gaussian of this std.
+  // dev. per axis (metres); with LoadGtKeyframes, the keyframe poses also rotated by a Gaussian
+  // angle of pose_noise_deg std. dev. per axis.
+  double pose_noise = 0.0;
+  double pose_noise_deg = 0.0;
+  int max_keyframes = 0;  // 0: the whole trajectory
   uint64_t seed = 1;
 
   std::string Check() const;

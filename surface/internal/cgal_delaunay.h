@@ -13,6 +13,7 @@
 #include <array>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 #include "surface/delaunay.h"
@@ -76,10 +77,10 @@ struct DelaunayMesh::Impl {
   bool VertexOnSurface(internal::VertexHandle v) const;
 
   // The walk of a ray from vertex `from` to `target` (paper §4.4): calls visit(cell) on every
-  // cell crossed, in order. Stops at the cell containing target or at an infinite cell (which
-  // is not visited), or after a cell lying wholly beyond the parameter `stop` along
-  // from→target (every vertex projects beyond it). Thread-safe on a triangulation that is not
-  // being modified.
+  // cell crossed, in order (a visit that returns bool ends the walk by returning false). Stops at
+  // the cell containing target or at an infinite cell (which is not visited), or after a cell lying
+  // wholly beyond the parameter `stop` along from→target (every vertex projects beyond it).
+  // Thread-safe on a triangulation that is not being modified.
   template <typename Visit>
   void Walk(internal::VertexHandle from, const internal::Point& target, double stop,
             Visit&& visit) const;
@@ -192,7 +193,12 @@ void DelaunayMesh::Impl::WalkLoop(const internal::Point& p, const internal::Poin
   // A guard against degenerate cycling: a walk never visits more cells than T has.
   for (size_t steps = 0; steps <= tri.number_of_cells(); ++steps) {
     if (tri.is_infinite(cell)) return;
-    visit(cell);
+    // A visit that returns bool ends the walk by returning false.
+    if constexpr (std::is_same_v<decltype(visit(cell)), bool>) {
+      if (!visit(cell)) return;
+    } else {
+      visit(cell);
+    }
     if (stop < 1.0) {
       double nearest = std::numeric_limits<double>::infinity();
       for (int i = 0; i < 4; ++i) {

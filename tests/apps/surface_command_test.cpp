@@ -60,7 +60,10 @@ fs::path* SurfaceCommandTest::dir_ = nullptr;
 const char* const kColumns =
     "keyframe,batch,points_in,points_filtered,points_added,points_rejected,points_duplicate,"
     "steiner_added,rays_new,rays_old,cells_e,cells_n,o_left_in_e,cells_t,cells_f,cells_o,"
-    "triangles,ms_steiner,ms_enclose,ms_shrink,ms_insert,ms_rays,ms_grow,ms_total";
+    "triangles,ms_steiner,ms_enclose,ms_shrink,ms_insert,ms_rays,ms_grow,ms_total,"
+    "genus_free_before,genus_free_after,genus_groups,genus_euler_change,smoothed_vertices,"
+    "smoothing_rejected,ms_genus,ms_smooth,rays_old_candidates,old_walk_cells,ms_rays_select,"
+    "ms_rays_old";
 
 TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPerKeyframe) {
   const fs::path drive = *dir_ / "drive";
@@ -159,6 +162,60 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
             << rejected << " rejected (" << 100.0 * rejected_share << "%), "
             << mesh.triangles.size() << " triangles\n";
   EXPECT_LT(rejected_share, 0.05);
+}
+
+// Step 6 (issue 7): --no-genus-refinement and --no-smoothing switch each part off on the same
+// stream. Smoothing moves vertices only (same triangles, same vertex count); without refinement
+// no group is added and F ∩ E outside O is left as step 5 made it; each output is a closed
+// oriented 2-manifold.
+TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
+  const fs::path drive = *dir_ / "drive6";
+  ASSERT_EQ(Run({"--quiet", "synth", "--preset", "tiny", "--frames", "10", "--out", drive.string()})
+                .exit_code,
+            0);
+  auto run = [&](const std::string& name, std::vector<std::string> flags) {
+    const fs::path out = *dir_ / name;
+    std::vector<std::string> args = {
+        "--quiet",       "surface", "--from-gt",  drive.string(),     "--out", out.string(),
+        "--point-noise", "0.05",    "--no-batch", "--init-keyframes", "4"};
+    args.insert(args.end(), flags.begin(), flags.end());
+    const RunResult r = Run(args);
+    EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+    return out;
+  };
+  const fs::path full = run("s6_full", {});
+  const fs::path no_smooth = run("s6_no_smooth", {"--no-smoothing"});
+  const fs::path none = run("s6_none", {"--no-smoothing", "--no-genus-refinement"});
+  const TriangleMesh m_full = ReadPlyMesh(full / "surface.ply");
+  const TriangleMesh m_no_smooth = ReadPlyMesh(no_smooth / "surface.ply");
+  const TriangleMesh m_none = ReadPlyMesh(none / "surface.ply");
+  for (const TriangleMesh* m : {&m_full, &m_no_smooth, &m_none}) {
+    const MeshCheckReport report = CheckMesh(*m);
+    EXPECT_TRUE(report.ok) << report.ToText();
+  }
+  EXPECT_EQ(m_full.triangles, m_no_smooth.triangles);
+  ASSERT_EQ(m_full.vertices.size(), m_no_smooth.vertices.size());
+  size_t moved = 0;
+  for (size_t i = 0; i < m_full.vertices.size(); ++i) {
+    moved += m_full.vertices[i] == m_no_smooth.vertices[i] ? 0 : 1;
+  }
+  EXPECT_GT(moved, m_full.vertices.size() / 4);
+  // The stats columns of step 6.
+  const std::vector<std::string> columns = Split(kColumns, ',');
+  auto sum = [&](const fs::path& out, const char* name) {
+    const std::vector<std::string> lines =
+        Split(ReadTextFile(out / "stats" / "keyframes.csv"), '\n');
+    const size_t k = std::find(columns.begin(), columns.end(), name) - columns.begin();
+    EXPECT_LT(k, columns.size()) << name;
+    double total = 0.0;
+    for (size_t i = 1; i < lines.size(); ++i) total += std::stod(Split(lines[i], ',').at(k));
+    return total;
+  };
+  EXPECT_GT(sum(full, "smoothed_vertices"), 0.0);
+  EXPECT_EQ(sum(no_smooth, "smoothed_vertices"), 0.0);
+  EXPECT_EQ(sum(none, "genus_groups"), 0.0);
+  EXPECT_EQ(sum(none, "genus_free_before"), sum(none, "genus_free_after"));
+  EXPECT_LE(sum(full, "genus_free_after"), sum(full, "genus_free_before"));
 }
 
 TEST_F(SurfaceCommandTest, MissingDriveIsOneErrorLineAndExitCode2) {

@@ -69,6 +69,13 @@ void BM_Sculpt(benchmark::State& state) {
   const auto& stream = Stream(&description);
   SculptorOptions options;
   options.enclosing = state.range(0) == 0 ? EnclosingMode::kBall : EnclosingMode::kConflictZones;
+  if (const char* step = std::getenv("OMNI_BENCH_RAY_GRID"))
+    options.ray_grid_step_factor = std::atof(step);
+  // OMNI_BENCH_OLD_RAYS=whole|all: the reference ways of re-tracing old rays (same counters).
+  if (const char* mode = std::getenv("OMNI_BENCH_OLD_RAYS")) {
+    if (std::string(mode) == "whole") options.old_rays = OldRayTracing::kWholeWalks;
+    if (std::string(mode) == "all") options.old_rays = OldRayTracing::kAllRays;
+  }
   std::vector<KeyframeStats> stats;
   TriangleMesh mesh;
   for (auto _ : state) {
@@ -116,6 +123,22 @@ void BM_Sculpt(benchmark::State& state) {
   state.counters["ms_insert"] = mean_of([](const KeyframeStats& s) { return s.ms_insert; });
   state.counters["ms_rays"] = mean_of([](const KeyframeStats& s) { return s.ms_rays; });
   state.counters["ms_grow"] = mean_of([](const KeyframeStats& s) { return s.ms_grow; });
+  state.counters["ms_select"] = mean_of([](const KeyframeStats& s) { return s.ms_rays_select; });
+  state.counters["ms_old"] = mean_of([](const KeyframeStats& s) { return s.ms_rays_old; });
+  state.counters["candidates"] =
+      mean_of([](const KeyframeStats& s) { return s.rays_old_candidates; });
+  state.counters["old_cells"] = mean_of([](const KeyframeStats& s) { return s.old_walk_cells; });
+  state.counters["cells_n"] = mean_of([](const KeyframeStats& s) { return s.cells_n; });
+  state.counters["ms_genus"] = mean_of([](const KeyframeStats& s) { return s.ms_genus; });
+  state.counters["ms_smooth"] = mean_of([](const KeyframeStats& s) { return s.ms_smooth; });
+  if (const char* csv = std::getenv("OMNI_BENCH_CSV")) {
+    if (FILE* f = std::fopen(csv, "w")) {
+      std::fprintf(f, "%s\n", KeyframeStatsCsvHeader().c_str());
+      for (const KeyframeStats& st : stats)
+        std::fprintf(f, "%s\n", KeyframeStatsCsvRow(st).c_str());
+      std::fclose(f);
+    }
+  }
   state.counters["manifold"] = CheckManifold(mesh).IsOrientedManifold() ? 1 : 0;
   state.SetLabel(description + ", " + std::to_string(stream.size()) +
                  " keyframes, E=" + (state.range(0) == 0 ? "ball" : "conflict zones"));

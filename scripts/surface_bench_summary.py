@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""Per-keyframe timing summary of `omnisculpt surface` (issue 6 benchmark) from OUT/stats/keyframes.csv.
+
+Prints, over the incremental keyframes (the batch row excluded): ms per keyframe median / p95 / max
+for the whole keyframe and for steps 1-5 alone (without step 6), the mean ms of each step, max |E|,
+and the flatness ratio = mean time over the last fifth / over the first fifth, where keyframes of
+the loop-closing zone are left out: those whose centre (OUT/poses.tum, one pose per keyframe) is
+within --loop-radius metres of a keyframe at least --loop-gap keyframes older.
+
+usage: surface_bench_summary.py OUT [--loop-radius 77] [--loop-gap 60]
+"""
+import argparse
+import csv
+import math
+import os
+import statistics
+
+
+def quantile(values, q):
+    v = sorted(values)
+    return v[min(len(v) - 1, int(q * len(v)))] if v else 0.0
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("out")
+    ap.add_argument("--loop-radius", type=float, default=77.0,
+                    help="metres (default r + l of the paper with s = 1.9 m: 15 s + 15 s sqrt(3))")
+    ap.add_argument("--loop-gap", type=int, default=60)
+    a = ap.parse_args()
+    rows = list(csv.DictReader(open(os.path.join(a.out, "stats", "keyframes.csv"))))
+    centres = {}
+    tum = os.path.join(a.out, "poses.tum")
+    if os.path.exists(tum):
+        for i, line in enumerate(l for l in open(tum) if l.strip() and not l.startswith("#")):
+            f = line.split()
+            centres[i] = tuple(float(x) for x in f[1:4])  # the rig origin: close to the centre
+    inc = [r for r in rows if r["batch"] == "0"]
+    f = lambda r, k: float(r.get(k, 0) or 0)
+    total = [f(r, "ms_total") for r in inc]
+    steps15 = [f(r, "ms_total") - f(r, "ms_genus") - f(r, "ms_smooth") for r in inc]
+
+    def in_loop_zone(r):
+        k = int(r["keyframe"])
+        if k not in centres:
+            return False
+        c = centres[k]
+        return any(math.dist(c, centres[j]) < a.loop_radius for j in range(0, k - a.loop_gap)
+                   if j in centres)
+
+    kept = [(f(r, "ms_total"), s) for r, s in zip(inc, steps15) if not in_loop_zone(r)]
+    fifth = max(1, len(kept) // 5)
+    flat = lambda i: (statistics.mean(x[i] for x in kept[-fifth:]) /
+                      max(1e-9, statistics.mean(x[i] for x in kept[:fifth]))) if kept else 0.0
+    print(f"{a.out}: {len(rows)} rows, {len(inc)} incremental keyframes, "
+          f"{len(inc) - len(kept)} in the loop-closing zone")
+    print(f"  ms per keyframe (all steps): median {quantile(total, .5):.1f} p95 "
+          f"{quantile(total, .95):.1f} max {max(total, default=0):.1f}; flatness {flat(0):.2f}")
+    print(f"  ms per keyframe (steps 1-5): median {quantile(steps15, .5):.1f} p95 "
+          f"{quantile(steps15, .95):.1f} max {max(steps15, default=0):.1f}; flatness {flat(1):.2f}")
+    print(f"  max |E| {max((int(r['cells_e']) for r in inc), default=0)}; cells in T at the end "
+          f"{rows[-1]['cells_t'] if rows else 0}")
+    keys = ["ms_steiner", "ms_enclose", "ms_shrink", "ms_insert", "ms_rays", "ms_rays_select",
+            "ms_rays_old", "ms_grow", "ms_genus", "ms_smooth"]
+    print("  mean ms: " + ", ".join(f"{k[3:]} {statistics.mean(f(r, k) for r in inc):.1f}"
+                                     for k in keys if inc and k in inc[0]))
+    added = sum(int(r["points_added"]) for r in rows)
+    rejected = sum(int(r["points_rejected"]) for r in rows)
+    print(f"  points added {added}, rejected {rejected} "
+          f"({100.0 * rejected / max(1, added + rejected):.2f}%)")
+
+
+if __name__ == "__main__":
+    main()

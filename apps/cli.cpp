@@ -33,6 +33,7 @@ int RunCommandLine(int argc, char** argv) {
   RegisterSfmCommand(app, global);
   RegisterSurfaceCommand(app, global);
   RegisterEvalCommands(app, global);
+  RegisterReconstructCommand(app, global);
 
   app.parse_complete_callback([&global] {
     spdlog::set_pattern("%^[%L]%$ %v");

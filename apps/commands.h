@@ -23,5 +23,6 @@ void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterEvalCommands(CLI::App& app, const GlobalOptions& global);
 void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global);
+void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace omni

@@ -1,13 +1,19 @@
 // `omnisculpt sfm DRIVE --out OUT [--central|--non-central]` (issue 8): the incremental rig SfM
 // of sfm/ on a drive's images, writing the keyframe poses (poses.tum), the points (points.ply)
-// and per-frame statistics (stats/sfm_frames.csv). A first version: frame-to-frame ZNCC tracks
-// per camera (sfm/track_builder.h) feeding sfm/tracker.h; no COLMAP export, no re-localisation
-// after a tracking failure yet.
+// a COLMAP text model (sparse/), per-frame statistics (stats/sfm_frames.csv), the time per
+// stage (stats/sfm_stages.csv) and a summary (stats/sfm_summary.csv). ZNCC tracks per camera
+// (sfm/track_builder.h, search regions by reprojection once the pose is predicted, and
+// re-localisation against the last keyframe after a failure) feeding sfm/tracker.h.
 
 #include <spdlog/spdlog.h>
 
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
+
 #include <chrono>
 #include <filesystem>
+#include <future>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -18,6 +24,7 @@
 #include "calib/error.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
+#include "sfm/colmap_model.h"
 #include "sfm/track_builder.h"
 #include "sfm/tracker.h"
 
@@ -31,15 +38,28 @@ struct SfmCommandOptions {
   bool non_central = false;
   int max_frames = 0;        // 0: all
   double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
+  // Central mode treats the camera centres as one point: a camera offset d seen at depth z
+  // bends the rays by about d / z radians. The map's scale is unknown in central mode, so the
+  // depth is the user's (metres; street facades are 5-20 m away); above this ratio of the
+  // largest offset to it, the log says the non-central mode is the right one.
+  double scene_depth = 10.0;
+  double max_central_offset_ratio = 0.01;
   TrackBuilderOptions tracks;
   TrackerOptions tracker;
 };
+
+// Seconds since `start`.
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
 
 void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
   if (o.out.empty()) throw InputError("", "--out", "an output folder is required");
   if (o.central && o.non_central)
     throw InputError("", "--central, --non-central", "give at most one of them");
   if (!(o.frame_rate > 0.0)) throw InputError("", "--frame-rate", "expected a positive rate");
+  if (o.max_frames < 0) throw InputError("", "--max-frames", "expected 0 or a positive count");
+  if (!(o.scene_depth > 0.0)) throw InputError("", "--scene-depth", "expected a positive depth");
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
   o.tracker.central = o.central ? true : o.non_central ? false : rig.central;
@@ -49,36 +69,86 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
                drive.NumFrames(), rig.NumCameras(), o.tracker.central ? "central" : "non-central",
                rig.MaxCenterOffset());
 
+  const double offset_ratio = rig.MaxCenterOffset() / o.scene_depth;
+  if (o.tracker.central && offset_ratio > o.max_central_offset_ratio)
+    spdlog::warn(
+        "sfm: central mode, but the cameras are up to {:.2f} m from their mean centre, {:.1f} % "
+        "of a {:.0f} m scene depth (--scene-depth): rays bent by up to {:.2f} degrees; the "
+        "non-central mode (--non-central) is the right one for this rig",
+        rig.MaxCenterOffset(), 100.0 * offset_ratio, o.scene_depth,
+        offset_ratio * 180.0 / 3.14159265358979323846);
+
+#ifdef __GLIBC__
+  // Every frame allocates and frees the same large image buffers (Harris responses, pyramids);
+  // above glibc's default mmap threshold each is a fresh mapping, and the page faults cost
+  // about half of the detection time (perf). Keep them in the heap instead.
+  mallopt(M_MMAP_THRESHOLD, 256 << 20);
+  mallopt(M_TRIM_THRESHOLD, 512 << 20);
+#endif
+
   TrackBuilder builder(rig, o.tracks);
   Tracker tracker(rig, o.tracker);
   const size_t num_frames =
       o.max_frames > 0 ? std::min<size_t>(drive.NumFrames(), o.max_frames) : drive.NumFrames();
   std::ostringstream csv;
-  csv << "frame,name,corners,matched,tracked,keyframe,inliers,status\n";
+  csv << "frame,name,corners,matched,predicted,relocalising,tracked,keyframe,inliers,status\n";
   const auto start = std::chrono::steady_clock::now();
+  auto last_progress = start;
+  double load_seconds = 0.0;
   int untracked = 0;
-  for (size_t f = 0; f < num_frames; ++f) {
+  std::vector<FinalizedKeyframe> keyframes;
+  // The next frame's images are decoded while the current one is processed.
+  auto load = [&drive, &rig](size_t frame) {
     std::vector<cv::Mat> images;
-    for (size_t c = 0; c < rig.NumCameras(); ++c) images.push_back(drive.LoadGray(f, c));
-    const TrackedFrame frame = builder.AddFrame(images);
+    for (size_t c = 0; c < rig.NumCameras(); ++c) images.push_back(drive.LoadGray(frame, c));
+    return images;
+  };
+  std::future<std::vector<cv::Mat>> next = std::async(std::launch::async, load, 0);
+  for (size_t f = 0; f < num_frames; ++f) {
+    auto load_start = std::chrono::steady_clock::now();
+    std::vector<cv::Mat> images = next.get();  // rethrows a loading error
+    if (f + 1 < num_frames) next = std::async(std::launch::async, load, f + 1);
+    load_seconds += SecondsSince(load_start);
+
+    // Search regions by reprojection of the map points once the pose is predicted.
+    Rigid3d predicted;
+    PixelPredictor predict;
+    if (tracker.PredictPose(&predicted)) {
+      const Rigid3d rig_from_world = predicted.Inverse();
+      predict = [&tracker, &rig, rig_from_world](int camera, int track, Eigen::Vector2d* pixel) {
+        Eigen::Vector3d position;
+        if (!tracker.TrackPosition(track, &position)) return false;
+        const Camera& model = rig.cameras[camera];
+        return model.Project(model.cam_from_rig * (rig_from_world * position), pixel) &&
+               model.IsInImage(*pixel);
+      };
+    }
+    const TrackedFrame frame = builder.AddFrame(images, predict);
     const FrameResult result = tracker.AddFrame(frame.observations);
+    builder.SetFrameResult(result.tracked, result.keyframe);
+    for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())
+      keyframes.push_back(std::move(keyframe));
     untracked += result.tracked ? 0 : 1;
     csv << f << ',' << drive.FrameName(f) << ',' << frame.num_corners << ',' << frame.num_matched
-        << ',' << result.tracked << ',' << result.keyframe << ',' << result.inliers << ','
-        << result.status << '\n';
+        << ',' << frame.num_predicted << ',' << frame.relocalising << ',' << result.tracked << ','
+        << result.keyframe << ',' << result.inliers << ',' << result.status << '\n';
     if (!result.tracked)
-      spdlog::warn("frame {}: not tracked ({})", drive.FrameName(f), result.status);
-    if (!global.quiet && ((f + 1) % 25 == 0 || f + 1 == num_frames)) {
-      const double seconds =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      const double rate = (f + 1) / std::max(seconds, 1e-9);
+      spdlog::warn("frame {}: not tracked ({}){}", drive.FrameName(f), result.status,
+                   frame.relocalising ? ", re-localising against the last keyframe" : "");
+    const auto now = std::chrono::steady_clock::now();
+    if (!global.quiet && (std::chrono::duration<double>(now - last_progress).count() >= 2.0 ||
+                          f + 1 == num_frames)) {
+      last_progress = now;
+      const double rate = (f + 1) / std::max(SecondsSince(start), 1e-9);
       spdlog::info("sfm: frame {}/{}, {:.1f} frames/s, ETA {:.0f} s, {} keyframes, {} points",
                    f + 1, num_frames, rate, (num_frames - f - 1) / rate, tracker.NumKeyframes(),
                    tracker.NumPoints());
     }
   }
   tracker.Finish();
-  std::vector<FinalizedKeyframe> keyframes = tracker.TakeFinalized();
+  for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())
+    keyframes.push_back(std::move(keyframe));
+  const double total_seconds = SecondsSince(start);
   if (tracker.NumKeyframes() < 2)
     throw InputError(o.drive, "images", "the SfM could not initialise (fewer than 2 keyframes)");
 
@@ -92,9 +162,49 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
   }
   WriteTum(poses, out / "poses.tum");
   WritePlyPoints(cloud, out / "points.ply");
+  const ColmapModelStats colmap = WriteColmapTextModel(
+      rig, keyframes,
+      [&drive](int frame, int camera) {
+        return std::filesystem::relative(drive.ImagePath(frame, camera), drive.folder())
+            .generic_string();
+      },
+      out / "sparse");
   WriteTextFileAtomically(out / "stats" / "sfm_frames.csv", csv.str());
-  spdlog::info("sfm: {} keyframes, {} points, {} of {} frames not tracked, written to {}",
-               poses.size(), cloud.points.size(), untracked, num_frames, out.string());
+
+  // Time per stage (wall seconds; detection and matching run in parallel over the cameras).
+  const TrackBuilder::Timings front = builder.StageTimings();
+  const Tracker::Timings back = tracker.StageTimings();
+  const std::vector<std::pair<std::string, double>> stages = {
+      {"load_wait", load_seconds},
+      {"detect", front.detect},
+      {"match", front.match},
+      {"resect", back.resect},
+      {"triangulate", back.triangulate},
+      {"bundle_adjustment", back.bundle_adjustment},
+      {"total", total_seconds}};
+  std::ostringstream stage_csv;
+  stage_csv << "stage,seconds,ms_per_frame\n";
+  for (const auto& [stage, seconds] : stages)
+    stage_csv << stage << ',' << seconds << ',' << 1000.0 * seconds / num_frames << '\n';
+  WriteTextFileAtomically(out / "stats" / "sfm_stages.csv", stage_csv.str());
+  std::ostringstream summary;
+  summary << "frames," << num_frames << "\nframes_not_tracked," << untracked << "\nkeyframes,"
+          << poses.size() << "\npoints," << cloud.points.size() << "\nobservations,"
+          << colmap.observations << "\nmean_reprojection_error_px,"
+          << colmap.mean_reprojection_error << "\nframes_per_second,"
+          << num_frames / std::max(total_seconds, 1e-9) << '\n';
+  WriteTextFileAtomically(out / "stats" / "sfm_summary.csv", "name,value\n" + summary.str());
+
+  spdlog::info(
+      "sfm: {} keyframes, {} points, {} of {} frames not tracked, {:.1f} frames/s, "
+      "written to {}",
+      poses.size(), cloud.points.size(), untracked, num_frames,
+      num_frames / std::max(total_seconds, 1e-9), out.string());
+  spdlog::info(
+      "sfm: seconds per stage: detect {:.1f}, match {:.1f}, resect {:.1f}, triangulate "
+      "{:.1f}, bundle adjustment {:.1f}, waiting for images {:.1f}, total {:.1f}",
+      front.detect, front.match, back.resect, back.triangulate, back.bundle_adjustment,
+      load_seconds, total_seconds);
 }
 
 }  // namespace
@@ -105,7 +215,7 @@ void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global) {
       "sfm", "Incremental rig SfM (Harris + ZNCC tracks, OpenGV, local bundle adjustment)");
   command->add_option("drive", o->drive, "Drive folder (rig.json, images/<camera>/...)")
       ->required();
-  command->add_option("--out", o->out, "Output folder (poses.tum, points.ply, stats/)");
+  command->add_option("--out", o->out, "Output folder (poses.tum, points.ply, sparse/, stats/)");
   command->add_flag("--central", o->central, "Central approximation (default: rig.json)");
   command->add_flag("--non-central", o->non_central, "True camera offsets (default: rig.json)");
   command
@@ -119,6 +229,11 @@ void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global) {
                    "Keyframe once fewer of the last keyframe's points are tracked")
       ->capture_default_str();
   command->add_option("--max-frames", o->max_frames, "0: the whole drive")->capture_default_str();
+  command
+      ->add_option("--scene-depth", o->scene_depth,
+                   "Typical scene depth (m), for the warning on large camera offsets in central "
+                   "mode")
+      ->capture_default_str();
   command->add_option("--frame-rate", o->frame_rate, "Timestamps of poses.tum: frame / rate")
       ->capture_default_str();
   command->callback([o, &global] { RunSfm(*o, global); });

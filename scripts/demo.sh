@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what is missing, builds omnisculpt (Release, all cores) and runs the main job on the
-# built-in default drive: the `demo` synthetic city (made once, then reused), its surface, and
-# the evaluation against ground truth. Output goes to out/ (override with OMNI_OUT).
+# built-in default drive: the `demo` synthetic city (made once, then reused), its reconstruction
+# (`omnisculpt reconstruct`: SfM and surface in one process) and the evaluation against ground
+# truth. Output goes to out/ (override with OMNI_OUT).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -16,16 +17,15 @@ if [ ! -f "$drive/gt/scene.json" ]; then
   "$omni" synth --preset demo --out "$drive"
 fi
 
-# The in-process SfM + surface pipeline (`omnisculpt reconstruct`) is not built yet; until it
-# is, the surface is sculpted from a simulated perfect SfM on the drive's ground truth.
-rec="$out/demo-from-gt"
-rm -rf "$rec.previous"
-[ -d "$rec" ] && mv "$rec" "$rec.previous"
-"$omni" surface --from-gt "$drive" --out "$rec"
-"$omni" mesh-check "$rec/surface.ply" || true
+# The whole job in one process: SfM and incremental surface on their own threads
+# (`omnisculpt reconstruct`), then the evaluation against the drive's ground truth. --force
+# replaces only a previous reconstruction (a folder with reconstruct.json), nothing else.
+rec="$out/demo"
+"$omni" reconstruct "$drive" --out "$rec" --force
 "$omni" eval --gt "$drive" --rec "$rec"
 
 echo
 echo "drive:   $drive (images/, gt/)"
-echo "surface: $rec/surface.ply"
-echo "report:  $rec/report/report.md (renders and plots beside it)"
+echo "mesh:    $rec/surface.ply (points.ply, poses.tum, stats/keyframes.csv beside it)"
+echo "renders: $rec/report/*.png (bird's-eye and keyframe views, estimated and ground truth)"
+echo "report:  $rec/report/report.md (error quantiles, trajectory, per-keyframe times)"

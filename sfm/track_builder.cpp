@@ -1,7 +1,10 @@
 #include "sfm/track_builder.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cassert>
+#include <chrono>
 
 namespace omni {
 
@@ -9,6 +12,10 @@ std::string TrackBuilderOptions::Check() const {
   if (const std::string problem = harris.Check(); !problem.empty()) return "harris." + problem;
   if (const std::string problem = zncc.Check(); !problem.empty()) return "zncc." + problem;
   if (!(search_radius > 0.0)) return "search_radius: expected a positive number of pixels";
+  if (!(predicted_search_radius > 0.0))
+    return "predicted_search_radius: expected a positive number of pixels";
+  if (!(relocalisation_search_radius > 0.0))
+    return "relocalisation_search_radius: expected a positive number of pixels";
   return {};
 }
 
@@ -17,51 +24,94 @@ TrackBuilder::TrackBuilder(const Rig& rig, const TrackBuilderOptions& options)
   assert(options.Check().empty());
 }
 
-TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images) {
+TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
+                                    const PixelPredictor& predict) {
   assert(images.size() == rig_.NumCameras());
+  const int num_cameras = static_cast<int>(images.size());
   TrackedFrame frame;
-  for (size_t c = 0; c < images.size(); ++c) {
-    CameraState& state = cameras_[c];
-    const cv::Mat prepared = PrepareImage(images[c], options_.harris);
-    std::vector<Eigen::Vector2d> corners;
-    for (const Corner& corner : DetectHarrisCorners(prepared, options_.harris))
-      corners.push_back(corner.pixel);
-    std::vector<int> tracks(corners.size(), -1);
+  frame.relocalising = lost_ && !keyframe_cameras_.empty();
+  const std::vector<CameraState>& sources = frame.relocalising ? keyframe_cameras_ : cameras_;
 
-    if (!state.corners.empty()) {
-      std::vector<SearchRegion> regions;
-      for (const Eigen::Vector2d& previous : state.corners)
-        regions.push_back({previous + state.flow, options_.search_radius});
-      const std::vector<ZnccMatch> matches =
-          MatchZncc(state.prepared, state.corners, regions, prepared, corners, options_.zncc);
-      std::vector<double> dx, dy;
-      for (const ZnccMatch& match : matches) {
-        tracks[match.index2] = state.tracks[match.index1];
-        dx.push_back(corners[match.index2].x() - state.corners[match.index1].x());
-        dy.push_back(corners[match.index2].y() - state.corners[match.index1].y());
+  // Detection, in parallel over the cameras.
+  auto start = std::chrono::steady_clock::now();
+  std::vector<cv::Mat> prepared(num_cameras);
+  std::vector<std::vector<Eigen::Vector2d>> corners(num_cameras);
+  tbb::parallel_for(0, num_cameras, [&](int c) {
+    prepared[c] = PrepareImage(images[c], options_.harris);
+    for (const Corner& corner : DetectHarrisCorners(prepared[c], options_.harris))
+      corners[c].push_back(corner.pixel);
+  });
+  auto now = std::chrono::steady_clock::now();
+  timings_.detect += std::chrono::duration<double>(now - start).count();
+  start = now;
+
+  // Search regions (the predictor reads the tracker: called here, not in the parallel part).
+  std::vector<std::vector<SearchRegion>> regions(num_cameras);
+  std::vector<int> num_predicted(num_cameras, 0);
+  for (int c = 0; c < num_cameras; ++c) {
+    const CameraState& source = sources[c];
+    for (size_t i = 0; i < source.corners.size(); ++i) {
+      Eigen::Vector2d pixel;
+      if (frame.relocalising) {
+        regions[c].push_back({source.corners[i], options_.relocalisation_search_radius});
+      } else if (predict && predict(c, source.tracks[i], &pixel)) {
+        regions[c].push_back({InputToPreparedPixel(pixel, options_.harris.downscale),
+                              options_.predicted_search_radius});
+        ++num_predicted[c];
+      } else {
+        regions[c].push_back({source.corners[i] + source.flow, options_.search_radius});
       }
-      frame.num_matched += static_cast<int>(matches.size());
-      if (!dx.empty()) {
-        std::nth_element(dx.begin(), dx.begin() + dx.size() / 2, dx.end());
-        std::nth_element(dy.begin(), dy.begin() + dy.size() / 2, dy.end());
-        state.flow = Eigen::Vector2d(dx[dx.size() / 2], dy[dy.size() / 2]);
-      }
+    }
+  }
+  // Matching, in parallel over the cameras.
+  std::vector<std::vector<ZnccMatch>> matches(num_cameras);
+  tbb::parallel_for(0, num_cameras, [&](int c) {
+    const CameraState& source = sources[c];
+    if (source.corners.empty() || corners[c].empty()) return;
+    matches[c] = MatchZncc(source.prepared, source.corners, regions[c], prepared[c], corners[c],
+                           options_.zncc);
+  });
+
+  for (int c = 0; c < num_cameras; ++c) {
+    const CameraState& source = sources[c];
+    std::vector<int> tracks(corners[c].size(), -1);
+    std::vector<double> dx, dy;
+    for (const ZnccMatch& match : matches[c]) {
+      tracks[match.index2] = source.tracks[match.index1];
+      dx.push_back(corners[c][match.index2].x() - source.corners[match.index1].x());
+      dy.push_back(corners[c][match.index2].y() - source.corners[match.index1].y());
+    }
+    frame.num_matched += static_cast<int>(matches[c].size());
+    frame.num_predicted += num_predicted[c];
+    CameraState& state = cameras_[c];
+    if (!dx.empty() && !frame.relocalising) {
+      std::nth_element(dx.begin(), dx.begin() + dx.size() / 2, dx.end());
+      std::nth_element(dy.begin(), dy.begin() + dy.size() / 2, dy.end());
+      state.flow = Eigen::Vector2d(dx[dx.size() / 2], dy[dy.size() / 2]);
+    } else if (frame.relocalising) {
+      state.flow = Eigen::Vector2d::Zero();
     }
     const Camera& camera = rig_.cameras[c];
-    for (size_t i = 0; i < corners.size(); ++i) {
+    for (size_t i = 0; i < corners[c].size(); ++i) {
       if (tracks[i] < 0) tracks[i] = next_track_++;
-      const Eigen::Vector2d pixel = PreparedToInputPixel(corners[i], options_.harris.downscale);
+      const Eigen::Vector2d pixel = PreparedToInputPixel(corners[c][i], options_.harris.downscale);
       Eigen::Vector3d bearing;
       if (!camera.Unproject(pixel, &bearing)) continue;
-      frame.observations.push_back({tracks[i], static_cast<int>(c), bearing});
+      frame.observations.push_back({tracks[i], c, bearing});
       frame.pixels.push_back(pixel);
     }
-    frame.num_corners += static_cast<int>(corners.size());
-    state.prepared = prepared;
-    state.corners = std::move(corners);
+    frame.num_corners += static_cast<int>(corners[c].size());
+    state.prepared = prepared[c];
+    state.corners = std::move(corners[c]);
     state.tracks = std::move(tracks);
   }
+  timings_.match += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return frame;
+}
+
+void TrackBuilder::SetFrameResult(bool tracked, bool keyframe) {
+  lost_ = !tracked;
+  if (tracked && keyframe) keyframe_cameras_ = cameras_;
 }
 
 }  // namespace omni

@@ -3,10 +3,15 @@
 // ZNCC against the previous frame of the same camera inside a search region predicted by a
 // constant image-motion model (the median displacement of the camera's last matches), chained
 // into tracks; matched and new corners become bearings through the camera model. Works on any
-// rig (1 to N cameras). Not yet: matching across overlapping neighbour cameras, and search
-// regions predicted by reprojection once the pose is known (issue 8).
+// rig (1 to N cameras); detection and matching run in parallel over the cameras (TBB).
+// Once the tracker predicts the pose (constant velocity), corners whose track has a map point
+// are searched in a small region around its reprojection (a PixelPredictor). After a frame the
+// tracker could not track (a black frame, a jump), the next frames are matched against the
+// last keyframe's images in a wider region (re-localisation), so that tracks resume with the
+// keyframe's track ids. Not yet: matching across overlapping neighbour cameras (issue 8).
 
 #include <Eigen/Core>
+#include <functional>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -23,6 +28,11 @@ struct TrackBuilderOptions {
   ZnccOptions zncc;
   // Radius of the search region around the predicted position (pixels of the prepared image).
   double search_radius = 30.0;
+  // Radius around the reprojection of a track's map point by the predicted pose (pixels of the
+  // prepared image): the constant-velocity model's error, mostly the change of turn rate.
+  double predicted_search_radius = 15.0;
+  // Radius when re-localising against the last keyframe (no motion model after a failure).
+  double relocalisation_search_radius = 80.0;
 
   std::string Check() const;
 };
@@ -31,15 +41,30 @@ struct TrackedFrame {
   std::vector<TrackObservation> observations;
   std::vector<Eigen::Vector2d> pixels;  // one per observation, input-image pixels
   int num_corners = 0;
-  int num_matched = 0;  // corners continuing a track of the previous frame
+  int num_matched = 0;        // corners continuing a track of the previous frame (or keyframe)
+  int num_predicted = 0;      // searched around a reprojection
+  bool relocalising = false;  // matched against the last keyframe
 };
+
+// Input-image pixel where `track` should appear in camera `camera` of the new frame (its map
+// point projected by the predicted pose); false when there is no prediction.
+using PixelPredictor = std::function<bool(int camera, int track, Eigen::Vector2d* pixel)>;
 
 class TrackBuilder {
  public:
   TrackBuilder(const Rig& rig, const TrackBuilderOptions& options);
 
   // images[c] is camera c's image of the frame (8-bit grey or colour, the size rig.json gives).
-  TrackedFrame AddFrame(const std::vector<cv::Mat>& images);
+  TrackedFrame AddFrame(const std::vector<cv::Mat>& images, const PixelPredictor& predict = {});
+  // What the tracker made of the frame just added: a keyframe becomes the reference of a later
+  // re-localisation; after a frame not tracked, the next frames are matched against it.
+  void SetFrameResult(bool tracked, bool keyframe);
+
+  struct Timings {
+    double detect = 0.0;  // seconds (wall) since the start: preparation and Harris
+    double match = 0.0;   // ZNCC matching and the bearings
+  };
+  Timings StageTimings() const { return timings_; }
 
  private:
   struct CameraState {
@@ -51,7 +76,10 @@ class TrackBuilder {
   Rig rig_;
   TrackBuilderOptions options_;
   std::vector<CameraState> cameras_;
+  std::vector<CameraState> keyframe_cameras_;  // the last keyframe's, for re-localisation
+  bool lost_ = false;
   int next_track_ = 0;
+  Timings timings_;
 };
 
 }  // namespace omni

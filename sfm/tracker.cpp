@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <chrono>
 #include <unordered_map>
 
 #include "sfm/absolute_pose_central.h"
@@ -23,6 +24,7 @@ std::string TrackerOptions::Check() const {
   if (num_fixed_keyframes < 1) return "num_fixed_keyframes: expected at least 1";
   if (min_init_points < 5) return "min_init_points: expected at least 5";
   if (min_resection_inliers < 4) return "min_resection_inliers: expected at least 4";
+  if (!(max_jump_ratio > 1.0)) return "max_jump_ratio: expected more than 1";
   return {};
 }
 
@@ -54,6 +56,42 @@ struct Tracker::Impl {
   std::vector<Point> points;
   std::unordered_map<int, int> track_to_point;
   std::vector<FinalizedKeyframe> finalized;
+  // Motion model: the last two tracked frames (frame index, world_from_rig), and the distance
+  // travelled over the tracked steps so far.
+  struct TrackedPose {
+    int frame;
+    Rigid3d world_from_rig;
+  };
+  std::vector<TrackedPose> last_tracked;  // at most two, oldest first
+  double travelled = 0.0;
+  int travelled_steps = 0;
+  Tracker::Timings timings;
+
+  void RecordTracked(int frame, const Rigid3d& world_from_rig) {
+    if (!last_tracked.empty() && last_tracked.back().frame == frame - 1) {
+      travelled +=
+          (world_from_rig.translation - last_tracked.back().world_from_rig.translation).norm();
+      ++travelled_steps;
+    }
+    last_tracked.push_back({frame, world_from_rig});
+    if (last_tracked.size() > 2) last_tracked.erase(last_tracked.begin());
+  }
+  // Constant velocity: the motion between the last two tracked frames (when consecutive)
+  // applied once per frame from the last tracked one to `frame`; without a velocity, the last
+  // tracked pose and false.
+  bool Predict(int frame, Rigid3d* world_from_rig) const {
+    if (last_tracked.empty()) return false;
+    const TrackedPose& last = last_tracked.back();
+    *world_from_rig = last.world_from_rig;
+    if (last_tracked.size() < 2 || last_tracked[0].frame != last.frame - 1) return false;
+    const Rigid3d step = last_tracked[0].world_from_rig.Inverse() * last.world_from_rig;
+    for (int f = last.frame; f < frame; ++f) *world_from_rig = *world_from_rig * step;
+    return true;
+  }
+  // Seconds since `start`, added to *total.
+  static void AddSeconds(std::chrono::steady_clock::time_point start, double* total) {
+    *total += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
 
   // Bearing rotated to the rig axes (the central frame's bearing in central mode).
   Eigen::Vector3d RigBearing(const TrackObservation& observation) const {
@@ -170,12 +208,13 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
   keyframe1.frame = num_frames - 1;
   keyframe1.world_from_rig = world_from_rig1;
   keyframe1.observations = observations;
-  keyframes.push_back(std::move(keyframe1));
   for (const auto& [i, position] : new_points) {
     const TrackObservation& a = keyframe0.observations[index0[i]];
     const TrackObservation& b = observations[index1[i]];
     AddPoint(a.track, position, 1, {{0, a.camera, a.bearing}, {1, b.camera, b.bearing}});
   }
+  // After the last use of keyframe0: the push_back may reallocate keyframes.
+  keyframes.push_back(std::move(keyframe1));
   LocalBundleAdjustment();
   result.tracked = true;
   result.keyframe = true;
@@ -187,6 +226,7 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
 
 FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& observations) {
   FrameResult result;
+  const auto resect_start = std::chrono::steady_clock::now();
   std::vector<Eigen::Vector3d> bearings, positions;
   std::vector<int> cameras, observation_index;
   for (size_t j = 0; j < observations.size(); ++j) {
@@ -211,10 +251,32 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& observatio
     ransac = EstimateNoncentralAbsolutePose(rig, bearings, cameras, positions, absolute,
                                             &world_from_rig);
   }
+  AddSeconds(resect_start, &timings.resect);
   if (!ransac.success || ransac.num_inliers < options.min_resection_inliers) {
     result.status = "resection failed: " + std::to_string(ransac.num_inliers) + " inliers of " +
                     std::to_string(bearings.size());
     return result;
+  }
+  // A pose far from the motion model is a wrong resection (wrong matches that agree), not a
+  // jump of the rig: rejected rather than put in the map.
+  Rigid3d predicted;
+  if (!last_tracked.empty()) {
+    Predict(num_frames - 1, &predicted);
+    const double last_step = last_tracked.size() == 2
+                                 ? (last_tracked[1].world_from_rig.translation -
+                                    last_tracked[0].world_from_rig.translation)
+                                       .norm()
+                                 : 0.0;
+    const double mean_step = travelled_steps > 0 ? travelled / travelled_steps : 0.0;
+    const int frames_since = num_frames - 1 - last_tracked.back().frame;
+    const double allowed =
+        options.max_jump_ratio * std::max(last_step, mean_step) * std::max(1, frames_since);
+    const double jump = (world_from_rig.translation - predicted.translation).norm();
+    if (mean_step > 0.0 && jump > allowed) {
+      result.status = "rejected: resected pose " + std::to_string(jump / mean_step) +
+                      " mean steps from the prediction";
+      return result;
+    }
   }
   result.tracked = true;
   result.world_from_rig = world_from_rig;
@@ -266,6 +328,7 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& observatio
 }
 
 void Tracker::Impl::TriangulateNewPoints(int keyframe) {
+  const auto start = std::chrono::steady_clock::now();
   const int window_begin =
       std::max(0, keyframe - options.num_free_keyframes - options.num_fixed_keyframes);
   for (const TrackObservation& observation : keyframes[keyframe].observations) {
@@ -286,6 +349,7 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
     if (TriangulatePoint(rays, options.triangulation, &position) == TriangulationStatus::kOk)
       AddPoint(observation.track, position, keyframe, std::move(track_observations));
   }
+  AddSeconds(start, &timings.triangulate);
 }
 
 void Tracker::Impl::LocalBundleAdjustment() {
@@ -326,7 +390,9 @@ void Tracker::Impl::LocalBundleAdjustment() {
   BundleAdjustmentOptions ba_options = options.bundle_adjustment;
   ba_options.mode = options.central ? BundleAdjustmentOptions::Mode::kCentral
                                     : BundleAdjustmentOptions::Mode::kNonCentral;
+  const auto start = std::chrono::steady_clock::now();
   const BundleAdjustmentSummary summary = LocalBundleAdjust(rig, ba_options, &problem);
+  AddSeconds(start, &timings.bundle_adjustment);
   if (!summary.success) return;
   for (size_t k = 0; k < problem.keyframes.size(); ++k)
     keyframes[keyframe_of[k]].world_from_rig = problem.keyframes[k].world_from_rig;
@@ -366,7 +432,8 @@ void Tracker::Impl::FinalizeUpTo(int end) {
       finalized_point.position = point.position;
       for (const PointObservation& o : point.observations)
         finalized_point.rays.push_back(
-            {o.keyframe, keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera)});
+            {o.keyframe, keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera), o.camera,
+             o.bearing});
       event.points.push_back(std::move(finalized_point));
     }
     finalized.push_back(std::move(event));
@@ -395,11 +462,29 @@ FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations)
     result.tracked = true;
     result.keyframe = true;
     result.status = "first keyframe";
+    impl_->RecordTracked(0, result.world_from_rig);
     return result;
   }
-  if (impl_->keyframes.size() == 1) return impl_->Initialise(observations);
-  return impl_->Track(observations);
+  const FrameResult result =
+      impl_->keyframes.size() == 1 ? impl_->Initialise(observations) : impl_->Track(observations);
+  if (result.tracked) impl_->RecordTracked(impl_->num_frames - 1, result.world_from_rig);
+  return result;
 }
+
+bool Tracker::PredictPose(Rigid3d* world_from_rig) const {
+  if (impl_->keyframes.size() < 2) return false;
+  return impl_->Predict(impl_->num_frames, world_from_rig) &&
+         impl_->last_tracked.back().frame == impl_->num_frames - 1;
+}
+
+bool Tracker::TrackPosition(int track, Eigen::Vector3d* position) const {
+  const auto it = impl_->track_to_point.find(track);
+  if (it == impl_->track_to_point.end() || !impl_->points[it->second].alive) return false;
+  *position = impl_->points[it->second].position;
+  return true;
+}
+
+Tracker::Timings Tracker::StageTimings() const { return impl_->timings; }
 
 void Tracker::Finish() { impl_->FinalizeUpTo(static_cast<int>(impl_->keyframes.size())); }
 
@@ -426,6 +511,106 @@ std::vector<int> Tracker::KeyframeFrames() const {
   std::vector<int> frames;
   for (const auto& keyframe : impl_->keyframes) frames.push_back(keyframe.frame);
   return frames;
+}
+
+// ---- Map access and correction (loop closure, issue 9) ----
+
+std::vector<std::pair<int, Eigen::Vector3d>> Tracker::KeyframeTrackPoints(int keyframe) const {
+  std::vector<std::pair<int, Eigen::Vector3d>> result;
+  for (const TrackObservation& observation : impl_->keyframes.at(keyframe).observations) {
+    const auto it = impl_->track_to_point.find(observation.track);
+    if (it == impl_->track_to_point.end() || !impl_->points[it->second].alive) continue;
+    result.emplace_back(observation.track, impl_->points[it->second].position);
+  }
+  return result;
+}
+
+void Tracker::ApplyCorrection(const std::vector<Sim3d>& new_from_old) {
+  assert(new_from_old.size() == impl_->keyframes.size());
+  for (size_t k = 0; k < impl_->keyframes.size(); ++k)
+    impl_->keyframes[k].world_from_rig =
+        TransformPose(new_from_old[k], impl_->keyframes[k].world_from_rig);
+  for (Impl::Point& point : impl_->points)
+    if (point.created_by >= 0) point.position = new_from_old[point.created_by] * point.position;
+}
+
+void Tracker::MergeTracks(const std::vector<std::pair<int, int>>& drop_keep) {
+  Impl& m = *impl_;
+  for (const auto& [drop, keep] : drop_keep) {
+    const auto d = m.track_to_point.find(drop), k = m.track_to_point.find(keep);
+    if (d == m.track_to_point.end() || k == m.track_to_point.end() || d->second == k->second)
+      continue;
+    Impl::Point& from = m.points[d->second];
+    Impl::Point& to = m.points[k->second];
+    if (!from.alive || !to.alive) continue;
+    for (const Impl::PointObservation& o : from.observations) {
+      const bool seen =
+          std::any_of(to.observations.begin(), to.observations.end(),
+                      [&](const Impl::PointObservation& t) { return t.keyframe == o.keyframe; });
+      if (!seen) to.observations.push_back(o);
+    }
+    from.alive = false;
+    d->second = k->second;
+  }
+}
+
+BundleAdjustmentSummary Tracker::GlobalBundleAdjust() {
+  Impl& m = *impl_;
+  BundleAdjustmentProblem problem;
+  for (size_t k = 0; k < m.keyframes.size(); ++k)
+    problem.keyframes.push_back({m.keyframes[k].world_from_rig, k < 2});
+  std::vector<int> point_of;
+  for (size_t p = 0; p < m.points.size(); ++p) {
+    const Impl::Point& point = m.points[p];
+    if (!point.alive) continue;
+    const int index = static_cast<int>(problem.points_in_world.size());
+    problem.points_in_world.push_back(point.position);
+    point_of.push_back(static_cast<int>(p));
+    for (const Impl::PointObservation& o : point.observations)
+      problem.observations.push_back({o.keyframe, o.camera, index, o.bearing});
+  }
+  BundleAdjustmentOptions options = m.options.bundle_adjustment;
+  options.mode = m.options.central ? BundleAdjustmentOptions::Mode::kCentral
+                                   : BundleAdjustmentOptions::Mode::kNonCentral;
+  options.linear_solver = BundleAdjustmentOptions::LinearSolver::kSparseSchur;
+  if (problem.observations.empty()) return {};
+  const BundleAdjustmentSummary summary = LocalBundleAdjust(m.rig, options, &problem);
+  if (!summary.success) return summary;
+  for (size_t k = 0; k < m.keyframes.size(); ++k)
+    m.keyframes[k].world_from_rig = problem.keyframes[k].world_from_rig;
+  for (size_t i = 0; i < point_of.size(); ++i)
+    m.points[point_of[i]].position = problem.points_in_world[i];
+  return summary;
+}
+
+std::vector<FinalizedKeyframe> Tracker::FinalizedSnapshot() const {
+  const Impl& m = *impl_;
+  std::vector<FinalizedKeyframe> result;
+  std::vector<std::vector<int>> created(m.keyframes.size());
+  for (size_t p = 0; p < m.points.size(); ++p)
+    if (m.points[p].alive && m.points[p].created_by >= 0)
+      created[m.points[p].created_by].push_back(static_cast<int>(p));
+  for (size_t k = 0; k < m.keyframes.size(); ++k) {
+    const Impl::Keyframe& keyframe = m.keyframes[k];
+    if (!keyframe.finalized) continue;
+    FinalizedKeyframe event;
+    event.keyframe = static_cast<int>(k);
+    event.frame = keyframe.frame;
+    event.world_from_rig = keyframe.world_from_rig;
+    event.center = keyframe.world_from_rig * m.central_center;
+    for (int p : created[k]) {
+      FinalizedPoint finalized_point;
+      finalized_point.point = p;
+      finalized_point.position = m.points[p].position;
+      for (const Impl::PointObservation& o : m.points[p].observations)
+        finalized_point.rays.push_back(
+            {o.keyframe, m.keyframes[o.keyframe].world_from_rig * m.CenterInRig(o.camera), o.camera,
+             o.bearing});
+      event.points.push_back(std::move(finalized_point));
+    }
+    result.push_back(std::move(event));
+  }
+  return result;
 }
 
 }  // namespace omni

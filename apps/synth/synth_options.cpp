@@ -105,6 +105,9 @@ std::vector<SynthPreset> SynthPresets() {
       {"paper",
        "1550 frames around 3x2 blocks (~600 m loop, ~0.4 m between frames): the paper's "
        "synthetic sequence"},
+      {"short",
+       "130 frames around the tiny block (~91 m loop) and 12 m past the start, ~0.8 m between "
+       "frames: end-to-end tests of sfm and reconstruct"},
   };
 }
 
@@ -123,6 +126,17 @@ SynthOptions SynthPresetOptions(const std::string& name) {
     options.trajectory.corner_radius = 6.0;
     options.trajectory.overlap = 6.0;
     options.trajectory.speed_cycles = 1;
+  } else if (name == "short") {
+    // The tiny city, driven slowly enough for the SfM to track every frame, once around and
+    // past the start so that a loop closure has overlap to find.
+    options = SynthPresetOptions("tiny");
+    options.preset = name;
+    options.trajectory.num_frames = 130;
+    options.trajectory.overlap = 12.0;
+    // Wide turns (the largest radius the block allows) and a steadier speed: about 4.5 degrees
+    // of heading per frame in the turns instead of the tiny preset's abrupt 10.
+    options.trajectory.corner_radius = 12.0;
+    options.trajectory.speed_variation = 0.1;
   } else if (name == "demo") {
     options.city.block_size_x = 36.0;
     options.city.block_size_y = 28.0;

@@ -64,5 +64,87 @@ TEST(TrackBuilder, ChainsTracksAlongAShiftedSequence) {
   EXPECT_GE(right, 0.95 * long_tracks);
 }
 
+// After black frames (no corners, so the frame-to-frame chain breaks) the tracker reports the
+// frames as not tracked; the next frame is matched against the last keyframe's images in the
+// wider re-localisation region, so its corners take the keyframe's track ids again.
+TEST(TrackBuilder, RelocalisesAgainstTheLastKeyframeAfterBlackFrames) {
+  Rig rig = MakeSyntheticRingRig(1, false, 0.0);
+  rig.cameras[0].width = 400;
+  rig.cameras[0].height = 300;
+  rig.cameras[0].params = {200.0, 200.0, 199.5, 149.5};
+  TrackBuilderOptions options;
+  options.search_radius = 12.0;
+  options.relocalisation_search_radius = 60.0;
+  TrackBuilder builder(rig, options);
+  const Eigen::Vector2d shift(5.0, 1.0);
+  auto texture = [&](int f) { return MakeSyntheticTexture(400, 300, f * shift, 250, 7); };
+
+  const TrackedFrame keyframe = builder.AddFrame({texture(0)});
+  builder.SetFrameResult(true, true);
+  std::map<int, Eigen::Vector2d> keyframe_pixel;
+  for (size_t i = 0; i < keyframe.observations.size(); ++i)
+    keyframe_pixel[keyframe.observations[i].track] = keyframe.pixels[i];
+  builder.AddFrame({texture(1)});
+  builder.SetFrameResult(true, false);
+  for (int f = 2; f < 4; ++f) {  // black frames
+    const TrackedFrame black = builder.AddFrame({cv::Mat::zeros(300, 400, CV_8U)});
+    EXPECT_EQ(black.num_corners, 0);
+    builder.SetFrameResult(false, false);
+  }
+  const TrackedFrame back = builder.AddFrame({texture(6)});  // 30 px from the keyframe
+  EXPECT_TRUE(back.relocalising);
+  int resumed = 0, right = 0;
+  for (size_t i = 0; i < back.observations.size(); ++i) {
+    const auto it = keyframe_pixel.find(back.observations[i].track);
+    if (it == keyframe_pixel.end()) continue;
+    ++resumed;
+    right += (back.pixels[i] - it->second - 6.0 * shift).norm() < 0.5 ? 1 : 0;
+  }
+  EXPECT_GT(resumed, 0.5 * keyframe.observations.size());
+  EXPECT_GE(right, 0.95 * resumed);
+  // Tracked again: the next frame chains from this one (not the keyframe).
+  builder.SetFrameResult(true, false);
+  EXPECT_FALSE(builder.AddFrame({texture(7)}).relocalising);
+}
+
+// With a predictor, corners of tracks it knows are searched around the predicted pixel in the
+// small predicted radius: a motion far beyond search_radius is still followed.
+TEST(TrackBuilder, SearchesAroundPredictedPixels) {
+  Rig rig = MakeSyntheticRingRig(1, false, 0.0);
+  rig.cameras[0].width = 400;
+  rig.cameras[0].height = 300;
+  rig.cameras[0].params = {200.0, 200.0, 199.5, 149.5};
+  TrackBuilderOptions options;
+  options.search_radius = 8.0;
+  options.predicted_search_radius = 4.0;
+  TrackBuilder builder(rig, options);
+  const Eigen::Vector2d shift(25.0, -10.0);  // far beyond search_radius
+  const TrackedFrame first = builder.AddFrame({MakeSyntheticTexture(400, 300, {0, 0}, 250, 9)});
+  std::map<int, Eigen::Vector2d> pixel_of;
+  for (size_t i = 0; i < first.observations.size(); ++i)
+    pixel_of[first.observations[i].track] = first.pixels[i];
+  const PixelPredictor predict = [&](int camera, int track, Eigen::Vector2d* pixel) {
+    EXPECT_EQ(camera, 0);
+    const auto it = pixel_of.find(track);
+    if (it == pixel_of.end()) return false;
+    *pixel = it->second + shift + Eigen::Vector2d(1.5, -1.0);  // a prediction 1.8 px off
+    return true;
+  };
+  const TrackedFrame second =
+      builder.AddFrame({MakeSyntheticTexture(400, 300, shift, 250, 9)}, predict);
+  EXPECT_EQ(second.num_predicted, static_cast<int>(first.observations.size()));
+  int right = 0;
+  for (size_t i = 0; i < second.observations.size(); ++i) {
+    const auto it = pixel_of.find(second.observations[i].track);
+    if (it != pixel_of.end()) right += (second.pixels[i] - it->second - shift).norm() < 0.5;
+  }
+  EXPECT_GT(right, 0.6 * first.observations.size());
+  // Without the predictor the same motion is lost.
+  TrackBuilder plain(rig, options);
+  plain.AddFrame({MakeSyntheticTexture(400, 300, {0, 0}, 250, 9)});
+  EXPECT_LT(plain.AddFrame({MakeSyntheticTexture(400, 300, shift, 250, 9)}).num_matched,
+            0.1 * first.observations.size());
+}
+
 }  // namespace
 }  // namespace omni

@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <random>
+#include <set>
+
 #include "sfm/synthetic.h"
 
 namespace omni {
@@ -118,6 +122,88 @@ TEST_P(TrackerTest, TracksSyntheticDriveWithSmallTrajectoryError) {
 
 INSTANTIATE_TEST_SUITE_P(Modes, TrackerTest,
                          ::testing::Values(Case{true, 0.0}, Case{true, 0.05}, Case{false, 0.3}));
+
+// Failures in the middle of a drive: black frames (no observations), a frame whose matches are
+// wrong (track ids shuffled), and a frame from 20 frames later (a jump the motion model cannot
+// explain). Each is reported and skipped; no wrong pose enters the map; the frames after them
+// are tracked again (their tracks are the map's, as after a re-localisation of the front end),
+// and the trajectory stays within 1 % of the distance driven.
+TEST(TrackerFailures, ReportsSkipsAndRecoversWithoutAWrongPose) {
+  const SyntheticDrive drive = MakeDrive(0.05, 70, 0.0003, 0.03);
+  TrackerOptions options;
+  Tracker tracker(drive.rig, options);
+  std::mt19937 random(5);
+  const std::set<int> black = {30, 31, 32}, shuffled = {40}, jump = {50};
+  std::vector<int> tracked_frames;
+  std::vector<Rigid3d> tracked_poses;
+  for (int f = 0; f < static_cast<int>(drive.frames.size()); ++f) {
+    std::vector<TrackObservation> observations = drive.frames[f];
+    if (black.count(f)) observations.clear();
+    if (shuffled.count(f)) {
+      std::vector<int> tracks;
+      for (const TrackObservation& o : observations) tracks.push_back(o.track);
+      std::shuffle(tracks.begin(), tracks.end(), random);
+      for (size_t i = 0; i < observations.size(); ++i) observations[i].track = tracks[i];
+    }
+    if (jump.count(f)) observations = drive.frames[f + 18];
+    const FrameResult result = tracker.AddFrame(observations);
+    const bool failure = black.count(f) || shuffled.count(f) || jump.count(f);
+    if (f >= 3) {
+      EXPECT_EQ(result.tracked, !failure) << "frame " << f << ": " << result.status;
+      if (failure) {
+        EXPECT_FALSE(result.status.empty());
+      }
+      // The jump's matches are right and resect well: the motion model rejects the pose.
+      if (jump.count(f)) {
+        EXPECT_EQ(result.status.rfind("rejected", 0), 0u) << result.status;
+      }
+    }
+    if (result.tracked) {
+      tracked_frames.push_back(f);
+      tracked_poses.push_back(result.world_from_rig);
+    }
+  }
+  tracker.Finish();
+  // Every tracked frame's pose (as reported, before later adjustments) near the truth.
+  std::vector<Eigen::Vector3d> estimated, truth;
+  for (size_t i = 0; i < tracked_frames.size(); ++i) {
+    estimated.push_back(tracked_poses[i].translation);
+    truth.push_back(drive.world_from_rig[tracked_frames[i]].translation);
+  }
+  const Sim3d truth_from_estimated = EstimateSim3Umeyama(estimated, truth, true);
+  double worst = 0.0;
+  for (size_t i = 0; i < estimated.size(); ++i)
+    worst = std::max(worst, (truth_from_estimated * estimated[i] - truth[i]).norm());
+  EXPECT_LT(AlignmentRms(truth_from_estimated, estimated, truth), 0.01 * drive.length);
+  EXPECT_LT(worst, 0.03 * drive.length);
+}
+
+// Before the initialisation there is no prediction; afterwards the constant-velocity
+// prediction of the next frame is close to its true pose (in the map's scale), and it is
+// withdrawn after a frame that was not tracked.
+TEST(TrackerFailures, PredictsByConstantVelocity) {
+  const SyntheticDrive drive = MakeDrive(0.0, 30, 0.0, 0.0);
+  Tracker tracker(drive.rig, TrackerOptions());
+  Rigid3d predicted;
+  EXPECT_FALSE(tracker.PredictPose(&predicted));
+  std::vector<Rigid3d> poses;
+  for (int f = 0; f < 20; ++f) poses.push_back(tracker.AddFrame(drive.frames[f]).world_from_rig);
+  ASSERT_TRUE(tracker.PredictPose(&predicted));
+  // Scale of the map: the estimated step over the true step.
+  const double scale =
+      (poses[19].translation - poses[18].translation).norm() /
+      (drive.world_from_rig[19].translation - drive.world_from_rig[18].translation).norm();
+  const Rigid3d true_step = drive.world_from_rig[19].Inverse() * drive.world_from_rig[20];
+  const Rigid3d predicted_step = poses[19].Inverse() * predicted;
+  EXPECT_NEAR(predicted_step.translation.norm() / scale, true_step.translation.norm(), 0.01);
+  EXPECT_LT(RotationAngleBetween(predicted_step.rotation, true_step.rotation), 1e-3);
+  Eigen::Vector3d position;
+  EXPECT_TRUE(tracker.TrackPosition(drive.frames[19][0].track, &position) ||
+              tracker.TrackPosition(drive.frames[19][1].track, &position));
+  EXPECT_FALSE(tracker.TrackPosition(-12345, &position));
+  tracker.AddFrame({});  // not tracked
+  EXPECT_FALSE(tracker.PredictPose(&predicted));
+}
 
 }  // namespace
 }  // namespace omni

@@ -1,0 +1,18 @@
+#pragma once
+// The sfm→surface contract of DESIGN.md §4 in code: a keyframe finalised by the tracker (its
+// pose and points no longer move) as the keyframe the incremental sculptor takes. The one
+// conversion between the two modules; sfm/ and surface/ never include each other.
+
+#include <vector>
+
+#include "sfm/tracker.h"
+#include "surface/sculptor.h"
+
+namespace omni {
+
+// Keyframe id, centre c_t, and for each point created with the keyframe its position and its
+// rays (observing keyframe, optical centre). Ids are the tracker's keyframe and point indices.
+SurfaceKeyframe ToSurfaceKeyframe(const FinalizedKeyframe& keyframe);
+std::vector<SurfaceKeyframe> ToSurfaceKeyframes(const std::vector<FinalizedKeyframe>& keyframes);
+
+}  // namespace omni

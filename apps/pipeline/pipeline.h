@@ -1,0 +1,96 @@
+#pragma once
+// The in-process pipeline of `omnisculpt reconstruct` (DESIGN.md §1): an SfM thread reads the
+// drive's frames, tracks them (sfm/track_builder.h, sfm/tracker.h) and hands every keyframe
+// that left the local adjustment window (its pose and points no longer move) through a bounded
+// queue to a surface thread running the incremental sculptor (surface/sculptor.h). The calling
+// thread reports progress. A frame whose image cannot be read is reported and skipped.
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "calib/drive.h"
+#include "calib/ply.h"
+#include "sfm/loop_closure.h"
+#include "sfm/track_builder.h"
+#include "sfm/tracker.h"
+#include "surface/sculptor.h"
+
+namespace omni {
+
+struct PipelineOptions {
+  TrackBuilderOptions tracks;
+  TrackerOptions tracker;
+  SculptorOptions sculptor;
+  // Loop closure (sfm/loop_closure.h): after a correction the surface thread replays the
+  // sculptor on the corrected finalised keyframes (the keyframes queued meanwhile wait).
+  bool loop_closure = true;
+  LoopClosureOptions loop;
+  // Keyframes waiting between the SfM and the surface threads; a full queue stalls the SfM
+  // (backpressure), so memory stays bounded however slow the surface is.
+  int queue_capacity = 8;
+  int max_frames = 0;            // 0: the whole drive
+  int snapshot_every = 0;        // snapshot callback every K sculpted keyframes; 0: none
+  double progress_period = 2.0;  // seconds between two progress callbacks
+
+  std::string Check() const;
+};
+
+// One row per frame of the drive (stats/sfm_frames.csv, the columns of `omnisculpt sfm`).
+struct PipelineFrameRow {
+  size_t frame = 0;
+  std::string name;
+  bool loaded = false;  // false: an image could not be read, the frame was skipped
+  int corners = 0, matched = 0;
+  FrameResult result;
+  double ms = 0.0;  // reading, tracking and, for a keyframe, the local adjustment
+};
+
+// One row per call of the sculptor that processed keyframes (the batch initialisation is one
+// row), with the time the keyframe waited in the queue.
+struct PipelineKeyframeRow {
+  KeyframeStats surface;
+  double queue_ms = 0.0;  // from the SfM's push to the surface's pop
+  int replay = 0;         // > 0: the row of a replay after the replay-th loop closure
+};
+
+struct PipelineProgress {
+  size_t frames_done = 0, frames_total = 0;
+  int keyframes = 0, points = 0;
+  size_t keyframes_sculpted = 0, triangles = 0;
+  double seconds = 0.0;
+};
+
+struct PipelineCallbacks {
+  // From the calling thread, every progress_period seconds and once at the end.
+  std::function<void(const PipelineProgress&)> progress;
+  // From the surface thread, after each multiple of snapshot_every sculpted keyframes.
+  std::function<void(const KeyframeId& last_keyframe, const TriangleMesh& mesh)> snapshot;
+};
+
+struct PipelineResult {
+  std::vector<FinalizedKeyframe> keyframes;  // every keyframe, in order, final poses and points
+  TriangleMesh mesh;
+  std::vector<PipelineFrameRow> frames;
+  std::vector<PipelineKeyframeRow> surface_rows;
+  std::vector<std::string> skipped;  // one message per skipped frame
+  size_t frames_total = 0;
+  double seconds = 0.0, sfm_seconds = 0.0, surface_seconds = 0.0;
+  size_t queue_max_size = 0, queue_blocked_pushes = 0;
+  double queue_blocked_seconds = 0.0;
+  std::vector<LoopClosureEvent> loop_closures;
+  double replay_seconds = 0.0;  // surface time spent replaying after corrections
+};
+
+// Runs the pipeline to the end of the drive. Throws InputError when the SfM cannot initialise
+// or every frame was skipped; rethrows, on the calling thread, what a stage thread threw.
+PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
+                           const PipelineCallbacks& callbacks = {});
+
+std::string PipelineFramesCsvHeader();
+std::string PipelineFramesCsvRow(const PipelineFrameRow& row);
+// KeyframeStatsCsvHeader() and the pipeline's columns (queue_ms).
+std::string PipelineKeyframesCsvHeader();
+std::string PipelineKeyframesCsvRow(const PipelineKeyframeRow& row);
+
+}  // namespace omni

@@ -1,0 +1,37 @@
+#pragma once
+// A COLMAP text model (cameras.txt, images.txt, points3D.txt; colmap.github.io/format.html)
+// of the finalised keyframes of the tracker (issue 8): one COLMAP camera per rig camera (models
+// PINHOLE, OPENCV or FULL_OPENCV, OPENCV_FISHEYE from calib's pinhole, opencv, fisheye), one
+// image per camera per keyframe named by `image_name` (e.g. "images/cam0/000123.png"), and one
+// 3-D point per finalised point with its observations as 2-D points. COLMAP puts pixel centres
+// at +0.5 (the image covers [0, width)), calib at integers: principal points and 2-D points
+// are shifted by 0.5.
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "calib/rig.h"
+#include "sfm/tracker.h"
+
+namespace omni {
+
+struct ColmapModelStats {
+  int images = 0;
+  int points = 0;
+  int observations = 0;                  // 2-D points with a 3-D point
+  double mean_reprojection_error = 0.0;  // pixels, over the observations
+};
+
+// Writes the three files into `folder` (created), each atomically. `image_name(frame, camera)`
+// names the image of a keyframe's frame. Points with no observation that projects are left out.
+ColmapModelStats WriteColmapTextModel(
+    const Rig& rig, const std::vector<FinalizedKeyframe>& keyframes,
+    const std::function<std::string(int frame, int camera)>& image_name,
+    const std::filesystem::path& folder);
+
+// COLMAP's name of a calib camera model and its parameters (COLMAP pixel convention).
+std::string ColmapCameraModel(const Camera& camera, std::vector<double>* params);
+
+}  // namespace omni

@@ -27,6 +27,9 @@ int RunCommandLine(int argc, char** argv) {
   GlobalOptions global;
   app.add_flag("-q,--quiet", global.quiet, "Print warnings and errors only");
   app.add_flag("-v,--verbose", global.verbose, "Print debug messages");
+  // The global flags are accepted after the subcommand too (`omnisculpt surface ... --quiet`):
+  // subcommands created below inherit this and pass options they do not know to the parent.
+  app.fallthrough();
 
   RegisterCalibCommands(app, global);
   RegisterSynthCommand(app, global);

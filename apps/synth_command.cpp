@@ -66,7 +66,7 @@ void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global) {
       "synth",
       "Ray-trace a synthetic textured city seen by the rig along a closed loop, with "
       "exact ground truth (poses, mesh)");
-  synth->add_option("--preset", command->preset, "tiny | demo | paper (see --list-presets)")
+  synth->add_option("--preset", command->preset, "tiny | demo | paper | short (see --list-presets)")
       ->capture_default_str();
   synth->add_option("--seed", command->seed, "Seed of the city, textures and noise")
       ->capture_default_str();

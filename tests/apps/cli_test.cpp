@@ -78,6 +78,15 @@ TEST_F(CliTest, UnknownOptionIsOneErrorLineAndExitTwo) {
   }
 }
 
+TEST_F(CliTest, GlobalFlagsAreAcceptedAfterTheSubcommand) {
+  const RunResult plain = Run({"calib", "show", "--default"});
+  for (const char* flag : {"--quiet", "-q", "--verbose"}) {
+    const RunResult result = Run({"calib", "show", "--default", flag});
+    EXPECT_EQ(result.exit_code, 0) << flag << ": " << result.err;
+    EXPECT_EQ(result.out, plain.out) << flag;
+  }
+}
+
 TEST_F(CliTest, CalibNeedsASubcommand) {
   const RunResult result = Run({"calib"});
   EXPECT_EQ(result.exit_code, 2);

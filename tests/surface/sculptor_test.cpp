@@ -12,6 +12,7 @@
 #include <random>
 
 #include "surface/manifold_check.h"
+#include "tests/surface/step6_scenes.h"
 
 namespace omni {
 namespace {
@@ -24,38 +25,12 @@ constexpr double kSpacing = 1.0;  // keyframe spacing, so s = 1
 Eigen::Vector3d Centre(int t) { return Eigen::Vector3d(kSpacing * t, 0.0, kCamHeight); }
 
 // Keyframe t: points on the walls and the ground near c_t, each with rays to the keyframes
-// t' ≤ t within 12 m (all visible: the street interior is free).
+// t' ≤ t within 12 m (all visible: the street interior is free); noise-free.
 std::vector<SurfaceKeyframe> StreetDrive(int num_keyframes, int points_per_keyframe,
                                          uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  std::vector<SurfaceKeyframe> drive;
-  uint32_t next_point = 0;
-  for (int t = 0; t < num_keyframes; ++t) {
-    SurfaceKeyframe kf;
-    kf.id = KeyframeId(t);
-    kf.centre = Centre(t);
-    for (int i = 0; i < points_per_keyframe; ++i) {
-      SurfacePoint p;
-      p.id = PointId(next_point++);
-      const double x = kf.centre.x() - 3.0 + 8.0 * u(rng);
-      const double side = u(rng);
-      if (side < 0.35) {
-        p.position = Eigen::Vector3d(x, -kHalfWidth, kWallHeight * u(rng));
-      } else if (side < 0.7) {
-        p.position = Eigen::Vector3d(x, kHalfWidth, kWallHeight * u(rng));
-      } else {
-        p.position = Eigen::Vector3d(x, kHalfWidth * (2.0 * u(rng) - 1.0), 0.0);
-      }
-      for (int k = std::max(0, t - 8); k <= t; k += 2) {
-        if ((Centre(k) - p.position).norm() <= 12.0) p.rays.push_back({KeyframeId(k), Centre(k)});
-      }
-      if (p.rays.empty() || p.rays.back().keyframe != kf.id) p.rays.push_back({kf.id, kf.centre});
-      kf.points.push_back(p);
-    }
-    drive.push_back(kf);
-  }
-  return drive;
+  static_assert(kSpacing == 1.0 && kCamHeight == 2.0, "the street of step6_scenes.h");
+  return testing::NoisyStreet(num_keyframes, points_per_keyframe, /*noise=*/0.0, seed, kHalfWidth,
+                              kWallHeight);
 }
 
 // Generalised winding number of a closed mesh at q (solid angles / 4π). With triangles facing

@@ -95,9 +95,13 @@ void Publish(const fs::path& partial, const fs::path& out) {
   fs::remove(partial / kIncompleteMarker);
   if (IsEmptyFolder(out)) fs::remove(out);
   if (fs::exists(out)) {
+    // A name nobody uses: only the checked previous reconstruction is ever removed.
     fs::path old = out;
     old += ".replaced";
-    fs::remove_all(old);
+    for (int k = 1; fs::exists(old); ++k) {
+      old = out;
+      old += ".replaced" + std::to_string(k);
+    }
     fs::rename(out, old);
     fs::rename(partial, out);
     fs::remove_all(old);

@@ -296,32 +296,8 @@ size_t DelaunayMesh::NumInO() const { return impl_->num_o; }
 size_t DelaunayMesh::NumSurfaceTriangles() const { return impl_->num_triangles; }
 
 TriangleMesh DelaunayMesh::ExtractSurface() const {
-  TriangleMesh mesh;
-  std::vector<int> compact(impl_->vertices.size(), -1);
-  auto index_of = [&](VertexHandle v) {
-    int& k = compact[v->info().index];
-    if (k < 0) {
-      k = static_cast<int>(mesh.vertices.size());
-      mesh.vertices.push_back(internal::ToEigen(v->point()));
-    }
-    return k;
-  };
-  for (auto c : impl_->tri.finite_cell_handles()) {
-    if (!c->info().in_o) continue;
-    for (int k = 0; k < 4; ++k) {
-      if (c->neighbor(k)->info().in_o) continue;
-      VertexHandle a = c->vertex((k + 1) & 3), b = c->vertex((k + 2) & 3),
-                   d = c->vertex((k + 3) & 3);
-      // Counter-clockwise seen from O: the cell's fourth vertex (inside O's side) on the
-      // positive side of the oriented plane (a, b, d).
-      if (CGAL::orientation(a->point(), b->point(), d->point(), c->vertex(k)->point()) ==
-          CGAL::NEGATIVE) {
-        std::swap(b, d);
-      }
-      mesh.triangles.emplace_back(index_of(a), index_of(b), index_of(d));
-    }
-  }
-  return mesh;
+  return internal::ExtractBorderOfO(*impl_,
+                                    [](VertexHandle v) { return internal::ToEigen(v->point()); });
 }
 
 }  // namespace omni

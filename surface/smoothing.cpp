@@ -356,30 +356,7 @@ SmoothingResult SurfaceSmoother::Update(const DelaunayMesh::Impl& t,
 }
 
 TriangleMesh SurfaceSmoother::Extract(const DelaunayMesh::Impl& t) const {
-  TriangleMesh mesh;
-  std::vector<int> compact(t.vertices.size(), -1);
-  auto index_of = [&](VertexHandle v) {
-    int& k = compact[v->info().index];
-    if (k < 0) {
-      k = static_cast<int>(mesh.vertices.size());
-      mesh.vertices.push_back(Position(v));
-    }
-    return k;
-  };
-  for (auto c : t.tri.finite_cell_handles()) {
-    if (!c->info().in_o) continue;
-    for (int k = 0; k < 4; ++k) {
-      if (c->neighbor(k)->info().in_o) continue;
-      VertexHandle a = c->vertex((k + 1) & 3), b = c->vertex((k + 2) & 3),
-                   d = c->vertex((k + 3) & 3);
-      if (CGAL::orientation(a->point(), b->point(), d->point(), c->vertex(k)->point()) ==
-          CGAL::NEGATIVE) {
-        std::swap(b, d);
-      }
-      mesh.triangles.emplace_back(index_of(a), index_of(b), index_of(d));
-    }
-  }
-  return mesh;
+  return ExtractBorderOfO(t, [this](VertexHandle v) { return Position(v); });
 }
 
 }  // namespace internal

@@ -269,4 +269,39 @@ void DelaunayMesh::Impl::WalkLoop(const internal::Point& p, const internal::Poin
   }
 }
 
+namespace internal {
+
+// δO as a triangle mesh, triangles counter-clockwise seen from O (the free space): the facets
+// between a cell of O and a cell outside it, each vertex placed at position_of(vertex).
+template <typename PositionOf>
+TriangleMesh ExtractBorderOfO(const DelaunayMesh::Impl& t, PositionOf position_of) {
+  TriangleMesh mesh;
+  std::vector<int> compact(t.vertices.size(), -1);
+  auto index_of = [&](VertexHandle v) {
+    int& k = compact[v->info().index];
+    if (k < 0) {
+      k = static_cast<int>(mesh.vertices.size());
+      mesh.vertices.push_back(position_of(v));
+    }
+    return k;
+  };
+  for (auto c : t.tri.finite_cell_handles()) {
+    if (!c->info().in_o) continue;
+    for (int k = 0; k < 4; ++k) {
+      if (c->neighbor(k)->info().in_o) continue;
+      VertexHandle a = c->vertex((k + 1) & 3), b = c->vertex((k + 2) & 3),
+                   d = c->vertex((k + 3) & 3);
+      // Counter-clockwise seen from O: the cell's fourth vertex (inside O's side) on the
+      // positive side of the oriented plane (a, b, d).
+      if (CGAL::orientation(a->point(), b->point(), d->point(), c->vertex(k)->point()) ==
+          CGAL::NEGATIVE) {
+        std::swap(b, d);
+      }
+      mesh.triangles.emplace_back(index_of(a), index_of(b), index_of(d));
+    }
+  }
+  return mesh;
+}
+
+}  // namespace internal
 }  // namespace omni

@@ -46,30 +46,6 @@ bool EdgeOnSurface(const Delaunay& tri, CellHandle c, int i, int j) {
   return any_in && any_out;
 }
 
-// Cells by counter, largest first, ties in push order (reproducible runs).
-class LargestFirst {
- public:
-  void Push(CellHandle c) { heap_.push({c->info().counter, -static_cast<int64_t>(next_++), c}); }
-  CellHandle Pop() {
-    const CellHandle c = heap_.top().cell;
-    heap_.pop();
-    return c;
-  }
-  bool Empty() const { return heap_.empty(); }
-
- private:
-  struct Entry {
-    uint32_t counter;
-    int64_t order;
-    CellHandle cell;
-    bool operator<(const Entry& o) const {
-      return counter != o.counter ? counter < o.counter : order < o.order;
-    }
-  };
-  uint64_t next_ = 0;
-  std::priority_queue<Entry> heap_;
-};
-
 class Refiner {
  public:
   Refiner(DelaunayMesh::Impl& t, const std::function<bool(CellHandle)>& in_region)
@@ -127,7 +103,7 @@ class Refiner {
   // triplets only (4,6,4), closing a tetrahedral bubble, changes χ (by −2, with one component
   // fewer); the others replace a disc of δO by a disc.
   void GrowOneAtOnce(const std::vector<CellHandle>& seeds) {
-    LargestFirst q;
+    CellQueue q(/*largest_first=*/true);
     for (const CellHandle& c : seeds) {
       if (Candidate(c)) q.Push(c);
     }
@@ -243,7 +219,7 @@ GenusRefinementResult RefineGenus(DelaunayMesh::Impl& t, const std::vector<CellH
       if (seed->info().in_o) continue;
       group.clear();
       seen.clear();
-      LargestFirst q;
+      CellQueue q(/*largest_first=*/true);
       q.Push(seed);
       seen.insert(seed);
       size_t next_size = std::min<size_t>(4, bound);

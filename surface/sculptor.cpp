@@ -81,34 +81,7 @@ double MsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// Cells by ray counter (smallest or largest first), ties in push order so that runs are
-// reproducible (cell addresses are not).
-class CellQueue {
- public:
-  explicit CellQueue(bool largest_first) : largest_first_(largest_first) {}
-  void Push(CellHandle c) {
-    const int64_t counter = c->info().counter;
-    heap_.push({largest_first_ ? counter : -counter, -static_cast<int64_t>(next_++), c});
-  }
-  CellHandle Pop() {
-    const CellHandle c = heap_.top().cell;
-    heap_.pop();
-    return c;
-  }
-  bool Empty() const { return heap_.empty(); }
-
- private:
-  struct Entry {
-    int64_t priority, order;
-    CellHandle cell;
-    bool operator<(const Entry& o) const {
-      return priority != o.priority ? priority < o.priority : order < o.order;
-    }
-  };
-  bool largest_first_;
-  uint64_t next_ = 0;
-  std::priority_queue<Entry> heap_;
-};
+using internal::CellQueue;
 
 struct PointRecord {
   VertexHandle vertex;

@@ -22,6 +22,7 @@
 #include "calib/tum.h"
 #include "tests/apps/run_omnisculpt.h"
 #include "tests/apps/short_drive.h"
+#include "tests/calib/io_temp_dir.h"
 
 namespace omni {
 namespace {
@@ -30,14 +31,8 @@ namespace fs = std::filesystem;
 
 class SfmCommandShortDrive : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() /
-                        ("omni_sfm_command_test_" + std::to_string(::getpid())));
-    fs::remove_all(*dir_);
-    fs::create_directories(*dir_);
-  }
+  static void SetUpTestSuite() { dir_ = new testing::TempDir("sfm_command_test"); }
   static void TearDownTestSuite() {
-    fs::remove_all(*dir_);
     delete dir_;
     dir_ = nullptr;
   }
@@ -47,13 +42,13 @@ class SfmCommandShortDrive : public ::testing::Test {
     ASSERT_FALSE(drive_.empty()) << error;
   }
   static testing::CommandResult Run(const std::vector<std::string>& arguments) {
-    return testing::RunOmnisculpt(arguments, *dir_);
+    return testing::RunOmnisculpt(arguments, dir_->path());
   }
 
   // Runs the SfM on the drive's first `frames` frames (0: all) and checks the end-to-end
   // contract: outputs present, every frame tracked, ATE below 1 % of the distance driven.
   void CheckEndToEnd(const std::string& mode, int frames, fs::path* out_folder = nullptr) {
-    const fs::path out = *dir_ / ("sfm" + mode);
+    const fs::path out = dir_->path() / ("sfm" + mode);
     if (out_folder) *out_folder = out;
     std::vector<std::string> arguments = {"--quiet", "sfm",        drive_.string(),
                                           "--out",   out.string(), mode};
@@ -108,10 +103,10 @@ class SfmCommandShortDrive : public ::testing::Test {
     EXPECT_LT(distances[distances.size() / 2], 0.1) << "median point-to-surface distance";
   }
 
-  static fs::path* dir_;
+  static testing::TempDir* dir_;
   fs::path drive_;
 };
-fs::path* SfmCommandShortDrive::dir_ = nullptr;
+testing::TempDir* SfmCommandShortDrive::dir_ = nullptr;
 
 // The COLMAP text model read back by `surface --colmap`'s reader: one keyframe per keyframe of
 // poses.tum with its centre (the mean camera centre), every point of points.ply.
@@ -185,11 +180,12 @@ TEST_F(SfmCommandShortDrive, NonCentralTracksEveryFrameWithinOnePercent) {
 
 TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
   const testing::CommandResult both =
-      Run({"sfm", drive_.string(), "--out", (*dir_ / "x").string(), "--central", "--non-central"});
+      Run({"sfm", drive_.string(), "--out", (dir_->path() / "x").string(), "--central",
+           "--non-central"});
   EXPECT_EQ(both.exit_code, 2);
   EXPECT_EQ(testing::SplitText(both.err).size(), 1u) << both.err;
-  const testing::CommandResult missing =
-      Run({"sfm", (*dir_ / "no_such_drive").string(), "--out", (*dir_ / "y").string()});
+  const testing::CommandResult missing = Run(
+      {"sfm", (dir_->path() / "no_such_drive").string(), "--out", (dir_->path() / "y").string()});
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_EQ(testing::SplitText(missing.err).size(), 1u) << missing.err;
 }

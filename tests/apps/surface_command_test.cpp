@@ -21,6 +21,7 @@
 #include "calib/ply.h"
 #include "calib/tum.h"
 #include "tests/apps/run_omnisculpt.h"
+#include "tests/calib/io_temp_dir.h"
 
 namespace omni {
 namespace {
@@ -36,25 +37,19 @@ std::vector<std::string> Split(const std::string& text, char separator) {
 
 class SurfaceCommandTest : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() /
-                        ("omni_surface_command_test_" + std::to_string(::getpid())));
-    fs::remove_all(*dir_);
-    fs::create_directories(*dir_);
-  }
+  static void SetUpTestSuite() { dir_ = new testing::TempDir("surface_command_test"); }
   static void TearDownTestSuite() {
-    fs::remove_all(*dir_);
     delete dir_;
     dir_ = nullptr;
   }
 
   static RunResult Run(const std::vector<std::string>& arguments) {
-    return testing::RunOmnisculpt(arguments, *dir_);
+    return testing::RunOmnisculpt(arguments, dir_->path());
   }
 
-  static fs::path* dir_;
+  static testing::TempDir* dir_;
 };
-fs::path* SurfaceCommandTest::dir_ = nullptr;
+testing::TempDir* SurfaceCommandTest::dir_ = nullptr;
 
 // The columns of stats/keyframes.csv documented in issue 6 and DESIGN.md §5.
 const char* const kColumns =
@@ -66,13 +61,13 @@ const char* const kColumns =
     "ms_rays_old";
 
 TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPerKeyframe) {
-  const fs::path drive = *dir_ / "drive";
+  const fs::path drive = dir_->path() / "drive";
   const RunResult synth =
       Run({"--quiet", "synth", "--preset", "tiny", "--frames", "12", "--out", drive.string()});
   ASSERT_EQ(synth.exit_code, 0) << synth.err;
 
   // Keyframes one by one (no batch), so that every keyframe has its own row.
-  const fs::path out = *dir_ / "surface";
+  const fs::path out = dir_->path() / "surface";
   const RunResult surface =
       Run({"--quiet", "surface", "--from-gt", drive.string(), "--out", out.string(), "--no-batch",
            "--init-keyframes", "4", "--snapshot-every", "4"});
@@ -169,12 +164,12 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
 // no group is added and F ∩ E outside O is left as step 5 made it; each output is a closed
 // oriented 2-manifold.
 TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
-  const fs::path drive = *dir_ / "drive6";
+  const fs::path drive = dir_->path() / "drive6";
   ASSERT_EQ(Run({"--quiet", "synth", "--preset", "tiny", "--frames", "10", "--out", drive.string()})
                 .exit_code,
             0);
   auto run = [&](const std::string& name, std::vector<std::string> flags) {
-    const fs::path out = *dir_ / name;
+    const fs::path out = dir_->path() / name;
     std::vector<std::string> args = {
         "--quiet",       "surface", "--from-gt",  drive.string(),     "--out", out.string(),
         "--point-noise", "0.05",    "--no-batch", "--init-keyframes", "4"};
@@ -219,14 +214,14 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
 }
 
 TEST_F(SurfaceCommandTest, MissingDriveIsOneErrorLineAndExitCode2) {
-  const fs::path missing = *dir_ / "no_such_drive";
+  const fs::path missing = dir_->path() / "no_such_drive";
   const RunResult result =
-      Run({"surface", "--from-gt", missing.string(), "--out", (*dir_ / "unused").string()});
+      Run({"surface", "--from-gt", missing.string(), "--out", (dir_->path() / "unused").string()});
   EXPECT_EQ(result.exit_code, 2);
   const std::vector<std::string> lines = Split(result.err, '\n');
   ASSERT_EQ(lines.size(), 1u) << result.err;
   EXPECT_NE(lines[0].find(missing.string()), std::string::npos) << lines[0];
-  EXPECT_FALSE(fs::exists(*dir_ / "unused" / "surface.ply"));
+  EXPECT_FALSE(fs::exists(dir_->path() / "unused" / "surface.ply"));
 }
 
 }  // namespace

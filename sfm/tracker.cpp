@@ -127,6 +127,8 @@ struct Tracker::Impl {
   void TriangulateNewPoints(int keyframe);
   void LocalBundleAdjustment();
   void FinalizeUpTo(int end);
+  // The "keyframe finalised" event of keyframe k: its pose and the points it created.
+  FinalizedKeyframe MakeFinalized(int k, const std::vector<int>& created_points) const;
 };
 
 FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& observations) {
@@ -414,29 +416,36 @@ void Tracker::Impl::LocalBundleAdjustment() {
   FinalizeUpTo(num_keyframes - options.num_free_keyframes);
 }
 
+FinalizedKeyframe Tracker::Impl::MakeFinalized(int k,
+                                               const std::vector<int>& created_points) const {
+  const Keyframe& keyframe = keyframes[k];
+  FinalizedKeyframe event;
+  event.keyframe = k;
+  event.frame = keyframe.frame;
+  event.world_from_rig = keyframe.world_from_rig;
+  event.center = keyframe.world_from_rig * central_center;
+  for (int p : created_points) {
+    FinalizedPoint finalized_point;
+    finalized_point.point = p;
+    finalized_point.position = points[p].position;
+    for (const PointObservation& o : points[p].observations)
+      finalized_point.rays.push_back({o.keyframe,
+                                      keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera),
+                                      o.camera, o.bearing});
+    event.points.push_back(std::move(finalized_point));
+  }
+  return event;
+}
+
 void Tracker::Impl::FinalizeUpTo(int end) {
   for (int k = 0; k < end; ++k) {
     Keyframe& keyframe = keyframes[k];
     if (keyframe.finalized) continue;
     keyframe.finalized = true;
-    FinalizedKeyframe event;
-    event.keyframe = k;
-    event.frame = keyframe.frame;
-    event.world_from_rig = keyframe.world_from_rig;
-    event.center = keyframe.world_from_rig * central_center;
-    for (size_t p = 0; p < points.size(); ++p) {
-      const Point& point = points[p];
-      if (!point.alive || point.created_by != k) continue;
-      FinalizedPoint finalized_point;
-      finalized_point.point = static_cast<int>(p);
-      finalized_point.position = point.position;
-      for (const PointObservation& o : point.observations)
-        finalized_point.rays.push_back(
-            {o.keyframe, keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera), o.camera,
-             o.bearing});
-      event.points.push_back(std::move(finalized_point));
-    }
-    finalized.push_back(std::move(event));
+    std::vector<int> created;
+    for (size_t p = 0; p < points.size(); ++p)
+      if (points[p].alive && points[p].created_by == k) created.push_back(static_cast<int>(p));
+    finalized.push_back(MakeFinalized(k, created));
   }
 }
 
@@ -590,26 +599,9 @@ std::vector<FinalizedKeyframe> Tracker::FinalizedSnapshot() const {
   for (size_t p = 0; p < m.points.size(); ++p)
     if (m.points[p].alive && m.points[p].created_by >= 0)
       created[m.points[p].created_by].push_back(static_cast<int>(p));
-  for (size_t k = 0; k < m.keyframes.size(); ++k) {
-    const Impl::Keyframe& keyframe = m.keyframes[k];
-    if (!keyframe.finalized) continue;
-    FinalizedKeyframe event;
-    event.keyframe = static_cast<int>(k);
-    event.frame = keyframe.frame;
-    event.world_from_rig = keyframe.world_from_rig;
-    event.center = keyframe.world_from_rig * m.central_center;
-    for (int p : created[k]) {
-      FinalizedPoint finalized_point;
-      finalized_point.point = p;
-      finalized_point.position = m.points[p].position;
-      for (const Impl::PointObservation& o : m.points[p].observations)
-        finalized_point.rays.push_back(
-            {o.keyframe, m.keyframes[o.keyframe].world_from_rig * m.CenterInRig(o.camera), o.camera,
-             o.bearing});
-      event.points.push_back(std::move(finalized_point));
-    }
-    result.push_back(std::move(event));
-  }
+  for (size_t k = 0; k < m.keyframes.size(); ++k)
+    if (m.keyframes[k].finalized)
+      result.push_back(m.MakeFinalized(static_cast<int>(k), created[k]));
   return result;
 }
 

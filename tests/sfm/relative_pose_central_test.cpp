@@ -21,16 +21,10 @@ TEST_P(CentralRelativePoseTest, RecoversKnownPoseWithOutliers) {
   const Rigid3d world_from_rig1(
       Eigen::Quaterniond(Eigen::AngleAxisd(0.2, Eigen::Vector3d(0.3, 1.0, -0.2).normalized())),
       Eigen::Vector3d(0.2, -0.8, 0.5));
-  SyntheticSceneOptions scene_options;
-  scene_options.num_points = 300;
-  scene_options.min_depth = 4.0;
-  scene_options.max_depth = 12.0;
-  scene_options.noise = 0.0005;
-  scene_options.outlier_ratio = 0.15;
-  scene_options.seed = GetParam().seed;
-  const SyntheticScene scene =
-      MakeSyntheticScene(rig, {world_from_rig0, world_from_rig1}, scene_options);
-  const SyntheticMatches matches = MatchSyntheticFrames(scene, 0, 1);
+  test::TwoViewSceneOptions two_view;  // 300 points at 4–12 m, 15 % outliers
+  two_view.seed = GetParam().seed;
+  const SyntheticMatches matches =
+      test::MakeTwoViewMatches(rig, world_from_rig0, world_from_rig1, two_view);
   ASSERT_GT(matches.bearings1.size(), 150u);
 
   CentralRelativePoseOptions options;

@@ -25,16 +25,15 @@ TEST_P(NoncentralRelativePoseTest, RecoversMetricPoseWithOutliers) {
   const Rigid3d world_from_rig1(
       Eigen::Quaterniond(Eigen::AngleAxisd(0.5, Eigen::Vector3d(0.1, 0.2, 1.0).normalized())),
       Eigen::Vector3d(1.8, 2.6, 0.2));
-  SyntheticSceneOptions scene_options;
-  scene_options.num_points = 400;
-  scene_options.min_depth = 2.0;
-  scene_options.max_depth = 8.0;
-  scene_options.noise = 0.0002;
-  scene_options.outlier_ratio = 0.1;
-  scene_options.seed = GetParam().seed;
-  const SyntheticScene scene =
-      MakeSyntheticScene(rig, {world_from_rig0, world_from_rig1}, scene_options);
-  const SyntheticMatches matches = MatchSyntheticFrames(scene, 0, 1);
+  test::TwoViewSceneOptions two_view;
+  two_view.num_points = 400;
+  two_view.min_depth = 2.0;
+  two_view.max_depth = 8.0;
+  two_view.noise = 0.0002;
+  two_view.outlier_ratio = 0.1;
+  two_view.seed = GetParam().seed;
+  const SyntheticMatches matches =
+      test::MakeTwoViewMatches(rig, world_from_rig0, world_from_rig1, two_view);
   ASSERT_GT(matches.bearings1.size(), 200u);
 
   NoncentralRelativePoseOptions options;

@@ -1,8 +1,11 @@
 #include "sfm/harris.h"
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <cassert>
+#include <cfloat>
 #include <cmath>
+#include <cstdint>
 #include <opencv2/imgproc.hpp>
 
 namespace omni {
@@ -60,75 +63,277 @@ Eigen::Vector2d InputToPreparedPixel(const Eigen::Vector2d& input, double downsc
   return (input.array() + 0.5) / downscale - 0.5;
 }
 
+namespace {
+
+// Buffers reused by the calls of one thread (the TrackBuilder detects on several threads), so
+// that a frame allocates nothing of image size.
+struct HarrisBuffers {
+  cv::Mat padded;
+  std::vector<int32_t> xx, xy, yy;  // products of the derivatives
+  std::vector<int32_t> row_sums;    // their sums over rows of three, one image after the other
+  cv::Mat response;
+  std::vector<Corner> candidates;
+  std::vector<int> bucket_of;
+  std::vector<std::vector<Corner>> buckets;
+};
+
+HarrisBuffers& ThreadBuffers() {
+  thread_local HarrisBuffers buffers;
+  return buffers;
+}
+
+// cv::cornerHarris(image, response, 3, 3, k) on exact integer sums: the 3×3 Sobel derivatives
+// dx, dy (BORDER_REFLECT_101 around the image), their products summed over 3×3 blocks (the
+// products reflected the same way), and the response det − k trace² of the derivatives scaled
+// as OpenCV scales them (1 / (4 · 3 · 255)). The block sums are exact integers, so the values
+// are OpenCV's float pipeline's to its rounding; each stage is one vectorisable pass.
+void HarrisResponse3x3(const cv::Mat& image, double k, HarrisBuffers* buffers) {
+  const int rows = image.rows, cols = image.cols;
+  const size_t count = static_cast<size_t>(rows) * cols;
+  cv::copyMakeBorder(image, buffers->padded, 1, 1, 1, 1, cv::BORDER_REFLECT_101);
+  buffers->xx.resize(count);
+  buffers->xy.resize(count);
+  buffers->yy.resize(count);
+  for (int y = 0; y < rows; ++y) {
+    // Padded row y + 1 is image row y; the pointers start at image column 0.
+    const uchar* up = buffers->padded.ptr<uchar>(y) + 1;
+    const uchar* mid = buffers->padded.ptr<uchar>(y + 1) + 1;
+    const uchar* down = buffers->padded.ptr<uchar>(y + 2) + 1;
+    int32_t* xx = buffers->xx.data() + static_cast<size_t>(y) * cols;
+    int32_t* xy = buffers->xy.data() + static_cast<size_t>(y) * cols;
+    int32_t* yy = buffers->yy.data() + static_cast<size_t>(y) * cols;
+    for (int x = 0; x < cols; ++x) {
+      const int32_t dx =
+          (up[x + 1] - up[x - 1]) + 2 * (mid[x + 1] - mid[x - 1]) + (down[x + 1] - down[x - 1]);
+      const int32_t dy =
+          (down[x - 1] + 2 * down[x] + down[x + 1]) - (up[x - 1] + 2 * up[x] + up[x + 1]);
+      xx[x] = dx * dx;
+      xy[x] = dx * dy;
+      yy[x] = dy * dy;
+    }
+  }
+  // Row sums of three (reflected at both ends), then column sums of three and the response,
+  // in float as OpenCV computes it (a, b, c: the block sums of the scaled derivatives).
+  buffers->row_sums.resize(3 * count);
+  int32_t* sums[3] = {buffers->row_sums.data(), buffers->row_sums.data() + count,
+                      buffers->row_sums.data() + 2 * count};
+  const int32_t* products[3] = {buffers->xx.data(), buffers->xy.data(), buffers->yy.data()};
+  for (int channel = 0; channel < 3; ++channel) {
+    for (int y = 0; y < rows; ++y) {
+      const int32_t* in = products[channel] + static_cast<size_t>(y) * cols;
+      int32_t* out = sums[channel] + static_cast<size_t>(y) * cols;
+      out[0] = in[1] + in[0] + in[1];
+      for (int x = 1; x < cols - 1; ++x) out[x] = in[x - 1] + in[x] + in[x + 1];
+      out[cols - 1] = in[cols - 2] + in[cols - 1] + in[cols - 2];
+    }
+  }
+  const float scale = static_cast<float>(1.0 / (4.0 * 3.0 * 255.0));
+  const float scale2 = scale * scale;
+  const float kf = static_cast<float>(k);
+  buffers->response.create(rows, cols, CV_32F);
+  for (int y = 0; y < rows; ++y) {
+    const size_t above = static_cast<size_t>(y > 0 ? y - 1 : 1) * cols;
+    const size_t here = static_cast<size_t>(y) * cols;
+    const size_t below = static_cast<size_t>(y + 1 < rows ? y + 1 : rows - 2) * cols;
+    const int32_t* xx = sums[0];
+    const int32_t* xy = sums[1];
+    const int32_t* yy = sums[2];
+    float* out = buffers->response.ptr<float>(y);
+    for (int x = 0; x < cols; ++x) {
+      const float a = static_cast<float>(xx[above + x] + xx[here + x] + xx[below + x]) * scale2;
+      const float b = static_cast<float>(xy[above + x] + xy[here + x] + xy[below + x]) * scale2;
+      const float c = static_cast<float>(yy[above + x] + yy[here + x] + yy[below + x]) * scale2;
+      out[x] = a * c - b * b - kf * (a + c) * (a + c);
+    }
+  }
+}
+
+// True when response(x, y) is the largest value of the (2 radius + 1)² window around it
+// (clipped to the image): the dilation test of non-maximum suppression, evaluated only where
+// needed. The 3×3 neighbourhood is tried first, which rejects most pixels.
+bool IsLocalMaximum(const cv::Mat& response, int x, int y, int radius) {
+  const float value = response.ptr<float>(y)[x];
+  const int x0 = std::max(0, x - radius), x1 = std::min(response.cols - 1, x + radius);
+  const int y0 = std::max(0, y - radius), y1 = std::min(response.rows - 1, y + radius);
+  for (int yy = std::max(y0, y - 1); yy <= std::min(y1, y + 1); ++yy) {
+    const float* row = response.ptr<float>(yy);
+    for (int xx = std::max(x0, x - 1); xx <= std::min(x1, x + 1); ++xx)
+      if (row[xx] > value) return false;
+  }
+  for (int yy = y0; yy <= y1; ++yy) {
+    const float* row = response.ptr<float>(yy);
+    for (int xx = x0; xx <= x1; ++xx)
+      if (row[xx] > value) return false;
+  }
+  return true;
+}
+
+// Bilinear samples of `image` (8-bit grey) on the size × size grid whose top-left sample is at
+// (x, y), into out (row-major); replicated border outside the image, as cv::getRectSubPix.
+void SampleWindow(const cv::Mat& image, float x, float y, int size, float* out) {
+  const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
+  const float a = x - ix, b = y - iy;
+  if (ix >= 0 && iy >= 0 && ix + size < image.cols && iy + size < image.rows) {
+    const float w00 = (1.f - a) * (1.f - b), w01 = a * (1.f - b), w10 = (1.f - a) * b, w11 = a * b;
+    for (int r = 0; r < size; ++r) {
+      const uchar* p0 = image.ptr<uchar>(iy + r) + ix;
+      const uchar* p1 = p0 + image.step[0];
+      float* o = out + r * size;
+      for (int c = 0; c < size; ++c)
+        o[c] = w00 * p0[c] + w01 * p0[c + 1] + w10 * p1[c] + w11 * p1[c + 1];
+    }
+    return;
+  }
+  cv::Mat window(size, size, CV_32F, out);
+  cv::getRectSubPix(image, cv::Size(size, size),
+                    cv::Point2f(x + 0.5f * (size - 1), y + 0.5f * (size - 1)), window, CV_32F);
+}
+
+// cv::cornerSubPix's own cap on the iterations.
+constexpr int kMaxSubpixelIterations = 100;
+
+// cv::cornerSubPix (no zero zone) with the window sampled in place: the same Gauss-weighted
+// normal equations of the gradients, iterated until the step is below `epsilon` pixels.
+void RefineCornersSubpixel(const cv::Mat& image, const HarrisOptions& options,
+                           std::vector<cv::Point2f>* points) {
+  const int half = options.subpixel_half_window;
+  const int win = 2 * half + 1, padded = win + 2;
+  // Per window pixel: the Gauss weight m, and m times the pixel's offset from the centre.
+  const int area = win * win;
+  Eigen::ArrayXf mask(area), mask_px(area), mask_py(area), gx(area), gy(area);
+  std::vector<float> buffer(padded * padded);
+  for (int i = 0; i < win; ++i) {
+    const float y = static_cast<float>(i - half) / half;
+    const float vy = std::exp(-y * y);
+    for (int j = 0; j < win; ++j) {
+      const float x = static_cast<float>(j - half) / half;
+      const int k = i * win + j;
+      mask[k] = vy * std::exp(-x * x);
+      mask_px[k] = mask[k] * (j - half);
+      mask_py[k] = mask[k] * (i - half);
+    }
+  }
+  const double eps2 = options.subpixel_epsilon * options.subpixel_epsilon;
+  const cv::Rect inside(0, 0, image.cols, image.rows);
+  for (cv::Point2f& point : *points) {
+    const cv::Point2f start = point;
+    cv::Point2f current = start;
+    for (int iteration = 0;
+         iteration < std::min(options.subpixel_iterations, kMaxSubpixelIterations); ++iteration) {
+      // The padded window centred at `current`, its central differences, and the weighted sums
+      // of the normal equations (float, vectorised).
+      SampleWindow(image, current.x - 0.5f * (padded - 1), current.y - 0.5f * (padded - 1), padded,
+                   buffer.data());
+      for (int i = 0, k = 0; i < win; ++i) {
+        const float* row = buffer.data() + (i + 1) * padded + 1;
+        for (int j = 0; j < win; ++j, ++k) {
+          gx[k] = row[j + 1] - row[j - 1];
+          gy[k] = row[j + padded] - row[j - padded];
+        }
+      }
+      const Eigen::ArrayXf gxx = gx * gx, gxy = gx * gy, gyy = gy * gy;
+      const double a = (mask * gxx).sum(), b = (mask * gxy).sum(), c = (mask * gyy).sum();
+      const double bb1 = (mask_px * gxx + mask_py * gxy).sum();
+      const double bb2 = (mask_px * gxy + mask_py * gyy).sum();
+      const double det = a * c - b * b;
+      if (std::fabs(det) <= DBL_EPSILON * DBL_EPSILON) break;
+      const double scale = 1.0 / det;
+      const cv::Point2f next(static_cast<float>(current.x + c * scale * bb1 - b * scale * bb2),
+                             static_cast<float>(current.y - b * scale * bb1 + a * scale * bb2));
+      const double err =
+          (next.x - current.x) * (next.x - current.x) + (next.y - current.y) * (next.y - current.y);
+      if (!inside.contains(next)) break;
+      current = next;
+      if (err <= eps2) break;
+    }
+    // Too far from the start: poor convergence, keep the start (as cv::cornerSubPix).
+    if (std::fabs(current.x - start.x) > half || std::fabs(current.y - start.y) > half)
+      current = start;
+    point = current;
+  }
+}
+
+}  // namespace
+
 std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOptions& options) {
   assert(options.Check().empty());
   assert(prepared.type() == CV_8UC1);
   std::vector<Corner> corners;
   if (prepared.cols <= 2 * options.border || prepared.rows <= 2 * options.border) return corners;
 
-  cv::Mat response;
-  cv::cornerHarris(prepared, response, options.block_size, options.sobel_aperture,
-                   options.harris_k);
+  HarrisBuffers& buffers = ThreadBuffers();
+  cv::Mat& response = buffers.response;
+  if (options.block_size == 3 && options.sobel_aperture == 3 && prepared.rows >= 3 &&
+      prepared.cols >= 3)
+    HarrisResponse3x3(prepared, options.harris_k, &buffers);
+  else
+    cv::cornerHarris(prepared, response, options.block_size, options.sobel_aperture,
+                     options.harris_k);
   double max_response = 0.0;
   cv::minMaxLoc(response, nullptr, &max_response);
   if (!(max_response > 0.0)) return corners;
   const float threshold = static_cast<float>(options.quality_level * max_response);
 
-  // Local maxima over a (2 min_distance + 1)² neighbourhood.
-  cv::Mat dilated;
-  const int kernel_size = 2 * options.min_distance + 1;
-  cv::dilate(response, dilated,
-             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(kernel_size, kernel_size)));
-
+  // Local maxima over a (2 min_distance + 1)² neighbourhood above the threshold, each with its
+  // grid bucket.
   const int num_cells = options.grid_cols * options.grid_rows;
-  std::vector<std::vector<Corner>> buckets(num_cells);
-  for (int y = options.border; y < prepared.rows - options.border; ++y) {
+  std::vector<Corner>& candidates = buffers.candidates;
+  std::vector<int>& bucket_of = buffers.bucket_of;
+  candidates.clear();
+  bucket_of.clear();
+  std::vector<int> bucket_size(num_cells, 0);
+  const int x_begin = options.border, x_end = prepared.cols - options.border;
+  const int y_begin = options.border, y_end = prepared.rows - options.border;
+  for (int y = y_begin; y < y_end; ++y) {
     const float* r = response.ptr<float>(y);
-    const float* d = dilated.ptr<float>(y);
     const int row = std::min(options.grid_rows - 1, y * options.grid_rows / prepared.rows);
-    for (int x = options.border; x < prepared.cols - options.border; ++x) {
-      if (r[x] < threshold || r[x] < d[x]) continue;
+    for (int x = x_begin; x < x_end; ++x) {
+      if (r[x] < threshold) continue;  // most pixels: a tight scan
+      if (!IsLocalMaximum(response, x, y, options.min_distance)) continue;
       const int col = std::min(options.grid_cols - 1, x * options.grid_cols / prepared.cols);
-      buckets[row * options.grid_cols + col].push_back({Eigen::Vector2d(x, y), r[x]});
+      const int cell = row * options.grid_cols + col;
+      candidates.push_back({Eigen::Vector2d(x, y), r[x]});
+      bucket_of.push_back(cell);
+      ++bucket_size[cell];
     }
   }
 
   // Each bucket keeps its strongest corners up to its quota; the quota left unused by poor
   // buckets goes to the others in turn, so the total stays max_corners when there are enough.
-  for (auto& bucket : buckets)
-    std::sort(bucket.begin(), bucket.end(),
-              [](const Corner& a, const Corner& b) { return a.response > b.response; });
-  std::vector<size_t> taken(num_cells, 0);
+  std::vector<int> taken(num_cells, 0);
   int remaining = options.max_corners;
   while (remaining > 0) {
     int open_buckets = 0;
-    for (int i = 0; i < num_cells; ++i) open_buckets += taken[i] < buckets[i].size() ? 1 : 0;
+    for (int i = 0; i < num_cells; ++i) open_buckets += taken[i] < bucket_size[i] ? 1 : 0;
     if (open_buckets == 0) break;
     const int quota = std::max(1, remaining / open_buckets);
     for (int i = 0; i < num_cells && remaining > 0; ++i) {
-      const size_t extra =
-          std::min<size_t>(quota, std::min<size_t>(buckets[i].size() - taken[i], remaining));
+      const int extra = std::min(quota, std::min(bucket_size[i] - taken[i], remaining));
       taken[i] += extra;
-      remaining -= static_cast<int>(extra);
+      remaining -= extra;
     }
   }
-  for (int i = 0; i < num_cells; ++i)
-    corners.insert(corners.end(), buckets[i].begin(), buckets[i].begin() + taken[i]);
+  // Only the buckets that must drop corners are ordered (a partial selection of their best).
+  std::vector<std::vector<Corner>>& buckets = buffers.buckets;
+  buckets.resize(num_cells);
+  for (auto& bucket : buckets) bucket.clear();
+  for (size_t k = 0; k < candidates.size(); ++k) buckets[bucket_of[k]].push_back(candidates[k]);
+  const auto stronger = [](const Corner& a, const Corner& b) { return a.response > b.response; };
+  for (int i = 0; i < num_cells; ++i) {
+    std::vector<Corner>& bucket = buckets[i];
+    if (taken[i] < static_cast<int>(bucket.size()))
+      std::nth_element(bucket.begin(), bucket.begin() + taken[i], bucket.end(), stronger);
+    corners.insert(corners.end(), bucket.begin(), bucket.begin() + taken[i]);
+  }
   if (corners.empty()) return corners;
 
   std::vector<cv::Point2f> points;
   points.reserve(corners.size());
   for (const Corner& corner : corners)
     points.emplace_back(static_cast<float>(corner.pixel.x()), static_cast<float>(corner.pixel.y()));
-  if (options.subpixel_iterations > 0) {
-    cv::cornerSubPix(prepared, points,
-                     cv::Size(options.subpixel_half_window, options.subpixel_half_window),
-                     cv::Size(-1, -1),
-                     cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS,
-                                      options.subpixel_iterations, options.subpixel_epsilon));
-  }
-  // cornerSubPix wanders off an edge-like or ill-defined corner: such corners are dropped, as
-  // their windows slide along the edge when matched.
+  if (options.subpixel_iterations > 0) RefineCornersSubpixel(prepared, options, &points);
+  // The subpixel step wanders off an edge-like or ill-defined corner: such corners are dropped,
+  // as their windows slide along the edge when matched.
   std::vector<Corner> refined_corners;
   refined_corners.reserve(corners.size());
   for (size_t i = 0; i < corners.size(); ++i) {
@@ -139,9 +344,13 @@ std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOpt
     refined_corners.push_back({refined, corners[i].response});
   }
   corners = std::move(refined_corners);
-  // Two maxima of one physical corner may converge to the same place: keep the stronger.
-  std::sort(corners.begin(), corners.end(),
-            [](const Corner& a, const Corner& b) { return a.response > b.response; });
+  // Two maxima of one physical corner may converge to the same place: keep the stronger (ties
+  // of response by position, so that the order does not depend on the selection above).
+  std::sort(corners.begin(), corners.end(), [](const Corner& a, const Corner& b) {
+    if (a.response != b.response) return a.response > b.response;
+    if (a.pixel.y() != b.pixel.y()) return a.pixel.y() < b.pixel.y();
+    return a.pixel.x() < b.pixel.x();
+  });
   std::vector<Corner> distinct;
   distinct.reserve(corners.size());
   const double min_separation = 0.5 * options.min_distance;

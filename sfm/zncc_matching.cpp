@@ -4,56 +4,97 @@
 #include <cassert>
 #include <cmath>
 #include <limits>
-#include <opencv2/imgproc.hpp>
 
 namespace omni {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-// A window resampled at a subpixel centre, zero-mean and unit-norm: the ZNCC of two windows is
-// then their dot product. Empty when the window leaves the image or is flat.
-std::vector<float> NormalisedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel,
-                                    int half_window) {
+// Normalised windows of one call, stored one after the other (no allocation per window).
+struct WindowSet {
+  int area = 0;
+  std::vector<float> values;  // window k at values[k * area]
+  std::vector<char> valid;
+
+  void Reset(size_t count, int window_area) {
+    area = window_area;
+    values.resize(count * window_area);
+    valid.assign(count, 0);
+  }
+  const float* operator[](size_t k) const { return values.data() + k * area; }
+  float* operator[](size_t k) { return values.data() + k * area; }
+};
+
+// The window of (2 half_window + 1)² pixels centred at a subpixel position, bilinearly sampled
+// (as cv::getRectSubPix), zero-mean and unit-norm: the ZNCC of two windows is then their dot
+// product. False when the window leaves the image or is flat.
+bool NormalisedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int half_window,
+                      float* values) {
   const double margin = half_window + 1.0;
   if (!(pixel.x() >= margin && pixel.y() >= margin && pixel.x() <= image.cols - 1 - margin &&
         pixel.y() <= image.rows - 1 - margin))
-    return {};
+    return false;
   const int size = 2 * half_window + 1;
-  cv::Mat window;
-  cv::getRectSubPix(image, cv::Size(size, size),
-                    cv::Point2f(static_cast<float>(pixel.x()), static_cast<float>(pixel.y())),
-                    window, CV_32F);
-  std::vector<float> values(window.begin<float>(), window.end<float>());
-  double mean = 0.0;
-  for (float v : values) mean += v;
-  mean /= values.size();
+  // Top-left sample; with the margin above, the window and its interpolation neighbours are
+  // inside the image.
+  const double x = pixel.x() - half_window, y = pixel.y() - half_window;
+  const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
+  const float a = static_cast<float>(x - ix), b = static_cast<float>(y - iy);
+  const float w00 = (1.f - a) * (1.f - b), w01 = a * (1.f - b), w10 = (1.f - a) * b, w11 = a * b;
+  double sum = 0.0;
+  for (int r = 0; r < size; ++r) {
+    const uchar* p0 = image.ptr<uchar>(iy + r) + ix;
+    const uchar* p1 = p0 + image.step[0];
+    float* v = values + r * size;
+    float row_sum = 0.f;
+    for (int c = 0; c < size; ++c) {
+      v[c] = w00 * p0[c] + w01 * p0[c + 1] + w10 * p1[c] + w11 * p1[c + 1];
+      row_sum += v[c];
+    }
+    sum += row_sum;
+  }
+  const int area = size * size;
+  const float mean = static_cast<float>(sum / area);
   double norm = 0.0;
-  for (float& v : values) {
-    v -= static_cast<float>(mean);
-    norm += static_cast<double>(v) * v;
+  for (int k = 0; k < area; ++k) {
+    values[k] -= mean;
+    norm += static_cast<double>(values[k]) * values[k];
   }
   norm = std::sqrt(norm);
   // Flat: below a quarter of a grey level of standard deviation.
-  if (norm < 0.25 * std::sqrt(static_cast<double>(values.size()))) return {};
-  for (float& v : values) v = static_cast<float>(v / norm);
-  return values;
+  if (norm < 0.25 * std::sqrt(static_cast<double>(area))) return false;
+  const float inverse = static_cast<float>(1.0 / norm);
+  for (int k = 0; k < area; ++k) values[k] *= inverse;
+  return true;
 }
 
-double Dot(const std::vector<float>& a, const std::vector<float>& b) {
-  double sum = 0.0;
-  for (size_t i = 0; i < a.size(); ++i) sum += static_cast<double>(a[i]) * b[i];
-  return sum;
+double Dot(const float* a, const float* b, int area) {
+  // Four partial sums: vectorised, and still double accumulation of the float products.
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  int k = 0;
+  for (; k + 4 <= area; k += 4) {
+    s0 += static_cast<double>(a[k]) * b[k];
+    s1 += static_cast<double>(a[k + 1]) * b[k + 1];
+    s2 += static_cast<double>(a[k + 2]) * b[k + 2];
+    s3 += static_cast<double>(a[k + 3]) * b[k + 3];
+  }
+  for (; k < area; ++k) s0 += static_cast<double>(a[k]) * b[k];
+  return (s0 + s1) + (s2 + s3);
 }
 
 // Moves pixel2 to the subpixel maximum of the ZNCC between window1 and the second image's
 // window there; returns that ZNCC (or the original score when nothing better is found).
-double RefineSubpixel(const std::vector<float>& window1, const cv::Mat& image2,
-                      const ZnccOptions& options, double score, Eigen::Vector2d* pixel2) {
+// `score` is the ZNCC at *pixel2 itself.
+double RefineSubpixel(const float* window1, const cv::Mat& image2, const ZnccOptions& options,
+                      double score, Eigen::Vector2d* pixel2, std::vector<float>* scratch) {
+  const int size = 2 * options.half_window + 1;
+  const int area = size * size;
+  scratch->resize(area);
   const double h = options.subpixel_step;
   auto score_at = [&](const Eigen::Vector2d& pixel) {
-    const std::vector<float> window2 = NormalisedWindow(image2, pixel, options.half_window);
-    return window2.empty() ? kNaN : Dot(window1, window2);
+    return NormalisedWindow(image2, pixel, options.half_window, scratch->data())
+               ? Dot(window1, scratch->data(), area)
+               : kNaN;
   };
   // Vertex of the parabola through (-h, minus), (0, centre), (h, plus), within [-h, h].
   auto vertex = [h](double minus, double centre, double plus) {
@@ -63,8 +104,8 @@ double RefineSubpixel(const std::vector<float>& window1, const cv::Mat& image2,
   };
   Eigen::Vector2d best = *pixel2;
   double best_score = score;
+  double centre = score;  // the ZNCC at `best`
   for (int iteration = 0; iteration < options.subpixel_iterations; ++iteration) {
-    const double centre = score_at(best);
     if (std::isnan(centre)) break;
     const Eigen::Vector2d dx(h, 0.0), dy(0.0, h);
     const Eigen::Vector2d step(vertex(score_at(best - dx), centre, score_at(best + dx)),
@@ -74,10 +115,74 @@ double RefineSubpixel(const std::vector<float>& window1, const cv::Mat& image2,
     if (!(candidate_score > std::max(best_score, centre))) break;
     best = candidate;
     best_score = candidate_score;
+    centre = candidate_score;
     if (step.norm() < 1e-3) break;
   }
   *pixel2 = best;
   return best_score;
+}
+
+// Corners of the second image by grid cell (compressed rows), to find those inside a search
+// disc without visiting them all.
+class CornerGrid {
+ public:
+  CornerGrid(const std::vector<Eigen::Vector2d>& corners, const cv::Size& image_size,
+             double cell_size)
+      : cell_size_(cell_size),
+        cols_(std::max(1, static_cast<int>(std::ceil(image_size.width / cell_size)))),
+        rows_(std::max(1, static_cast<int>(std::ceil(image_size.height / cell_size)))),
+        start_(cols_ * rows_ + 1, 0),
+        indices_(corners.size()) {
+    std::vector<int> cell_of(corners.size());
+    for (size_t j = 0; j < corners.size(); ++j) {
+      cell_of[j] = Row(corners[j].y()) * cols_ + Col(corners[j].x());
+      ++start_[cell_of[j] + 1];
+    }
+    for (size_t k = 1; k < start_.size(); ++k) start_[k] += start_[k - 1];
+    std::vector<int> fill(start_.begin(), start_.end() - 1);
+    for (size_t j = 0; j < corners.size(); ++j) indices_[fill[cell_of[j]]++] = static_cast<int>(j);
+  }
+
+  // Indices (ascending) of the corners in the cells that meet the disc's bounding box.
+  void Near(const Eigen::Vector2d& centre, double radius, std::vector<int>* out) const {
+    out->clear();
+    const int c0 = Col(centre.x() - radius), c1 = Col(centre.x() + radius);
+    const int r0 = Row(centre.y() - radius), r1 = Row(centre.y() + radius);
+    for (int r = r0; r <= r1; ++r)
+      for (int c = c0; c <= c1; ++c) {
+        const int cell = r * cols_ + c;
+        out->insert(out->end(), indices_.begin() + start_[cell],
+                    indices_.begin() + start_[cell + 1]);
+      }
+    std::sort(out->begin(), out->end());
+  }
+
+ private:
+  int Col(double x) const {
+    return static_cast<int>(std::clamp(std::floor(x / cell_size_), 0.0, cols_ - 1.0));
+  }
+  int Row(double y) const {
+    return static_cast<int>(std::clamp(std::floor(y / cell_size_), 0.0, rows_ - 1.0));
+  }
+  double cell_size_;
+  int cols_, rows_;
+  std::vector<int> start_;
+  std::vector<int> indices_;
+};
+
+// Side of the cells of the CornerGrid (pixels): a few corners per cell at the usual density.
+constexpr double kGridCell = 16.0;
+
+// Buffers reused by the calls of one thread (matching runs in parallel over the cameras).
+struct MatchBuffers {
+  WindowSet windows1, windows2;
+  std::vector<int> near;
+  std::vector<float> scratch;
+};
+
+MatchBuffers& ThreadBuffers() {
+  thread_local MatchBuffers buffers;
+  return buffers;
 }
 
 }  // namespace
@@ -95,10 +200,12 @@ std::string ZnccOptions::Check() const {
 
 double Zncc(const cv::Mat& image1, const Eigen::Vector2d& pixel1, const cv::Mat& image2,
             const Eigen::Vector2d& pixel2, int half_window) {
-  const std::vector<float> a = NormalisedWindow(image1, pixel1, half_window);
-  const std::vector<float> b = NormalisedWindow(image2, pixel2, half_window);
-  if (a.empty() || b.empty()) return kNaN;
-  return Dot(a, b);
+  const int area = (2 * half_window + 1) * (2 * half_window + 1);
+  std::vector<float> a(area), b(area);
+  if (!NormalisedWindow(image1, pixel1, half_window, a.data()) ||
+      !NormalisedWindow(image2, pixel2, half_window, b.data()))
+    return kNaN;
+  return Dot(a.data(), b.data(), area);
 }
 
 std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
@@ -109,31 +216,40 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
   assert(options.Check().empty());
   assert(regions.size() == corners1.size());
   assert(image1.type() == CV_8UC1 && image2.type() == CV_8UC1);
-  std::vector<std::vector<float>> windows1(corners1.size()), windows2(corners2.size());
+  MatchBuffers& buffers = ThreadBuffers();
+  const int area = (2 * options.half_window + 1) * (2 * options.half_window + 1);
+  WindowSet& windows1 = buffers.windows1;
+  WindowSet& windows2 = buffers.windows2;
+  windows1.Reset(corners1.size(), area);
+  windows2.Reset(corners2.size(), area);
   for (size_t i = 0; i < corners1.size(); ++i)
     if (regions[i].radius >= 0.0)
-      windows1[i] = NormalisedWindow(image1, corners1[i], options.half_window);
+      windows1.valid[i] = NormalisedWindow(image1, corners1[i], options.half_window, windows1[i]);
   for (size_t j = 0; j < corners2.size(); ++j)
-    windows2[j] = NormalisedWindow(image2, corners2[j], options.half_window);
+    windows2.valid[j] = NormalisedWindow(image2, corners2[j], options.half_window, windows2[j]);
+  const CornerGrid grid(corners2, image2.size(), kGridCell);
 
   // Best and second best score for each corner of the first image; best for each corner of
-  // the second among the first-image corners whose region contains it.
+  // the second among the first-image corners whose region contains it (candidates visited in
+  // index order, as a scan of all of them would).
   constexpr double kNone = -2.0;
   std::vector<int> best1(corners1.size(), -1);
   std::vector<double> score1(corners1.size(), kNone), second1(corners1.size(), kNone);
   std::vector<int> best2(corners2.size(), -1);
   std::vector<double> score2(corners2.size(), kNone);
+  std::vector<int>& near = buffers.near;
   for (size_t i = 0; i < corners1.size(); ++i) {
-    if (windows1[i].empty()) continue;
+    if (!windows1.valid[i]) continue;
     const double radius_squared = regions[i].radius * regions[i].radius;
-    for (size_t j = 0; j < corners2.size(); ++j) {
-      if (windows2[j].empty()) continue;
+    grid.Near(regions[i].center, regions[i].radius, &near);
+    for (const int j : near) {
+      if (!windows2.valid[j]) continue;
       if ((corners2[j] - regions[i].center).squaredNorm() > radius_squared) continue;
-      const double score = Dot(windows1[i], windows2[j]);
+      const double score = Dot(windows1[i], windows2[j], area);
       if (score > score1[i]) {
         second1[i] = score1[i];
         score1[i] = score;
-        best1[i] = static_cast<int>(j);
+        best1[i] = j;
       } else if (score > second1[i]) {
         second1[i] = score;
       }
@@ -156,7 +272,8 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
     if (options.mutual && best2[j] != static_cast<int>(i)) continue;
     ZnccMatch match{static_cast<int>(i), j, score1[i], corners2[j]};
     if (options.subpixel)
-      match.zncc = RefineSubpixel(windows1[i], image2, options, match.zncc, &match.pixel2);
+      match.zncc =
+          RefineSubpixel(windows1[i], image2, options, match.zncc, &match.pixel2, &buffers.scratch);
     matches.push_back(match);
   }
   if (!options.mutual) {

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <opencv2/imgproc.hpp>
+#include <random>
 
 #include "sfm/harris.h"
 #include "sfm/synthetic.h"
@@ -14,6 +16,121 @@ std::vector<Eigen::Vector2d> Pixels(const std::vector<Corner>& corners) {
   std::vector<Eigen::Vector2d> pixels;
   for (const Corner& corner : corners) pixels.push_back(corner.pixel);
   return pixels;
+}
+
+// The ZNCC as first written: cv::getRectSubPix windows, normalised in double.
+double ReferenceZncc(const cv::Mat& image1, const Eigen::Vector2d& pixel1, const cv::Mat& image2,
+                     const Eigen::Vector2d& pixel2, int half_window) {
+  auto window = [half_window](const cv::Mat& image, const Eigen::Vector2d& pixel) {
+    const double margin = half_window + 1.0;
+    if (!(pixel.x() >= margin && pixel.y() >= margin && pixel.x() <= image.cols - 1 - margin &&
+          pixel.y() <= image.rows - 1 - margin))
+      return std::vector<double>();
+    const int size = 2 * half_window + 1;
+    cv::Mat patch;
+    cv::getRectSubPix(image, cv::Size(size, size),
+                      cv::Point2f(static_cast<float>(pixel.x()), static_cast<float>(pixel.y())),
+                      patch, CV_32F);
+    std::vector<double> values(patch.begin<float>(), patch.end<float>());
+    double mean = 0.0, norm = 0.0;
+    for (double v : values) mean += v;
+    mean /= values.size();
+    for (double& v : values) {
+      v -= mean;
+      norm += v * v;
+    }
+    norm = std::sqrt(norm);
+    if (norm < 0.25 * std::sqrt(static_cast<double>(values.size()))) return std::vector<double>();
+    for (double& v : values) v /= norm;
+    return values;
+  };
+  const std::vector<double> a = window(image1, pixel1), b = window(image2, pixel2);
+  if (a.empty() || b.empty()) return std::numeric_limits<double>::quiet_NaN();
+  double dot = 0.0;
+  for (size_t k = 0; k < a.size(); ++k) dot += a[k] * b[k];
+  return dot;
+}
+
+TEST(Zncc, SameScoresAsTheReferenceWindows) {
+  const cv::Mat image1 = MakeSyntheticTexture(200, 160, Eigen::Vector2d::Zero(), 80, 5);
+  const cv::Mat image2 = MakeSyntheticTexture(200, 160, Eigen::Vector2d(1.3, -0.7), 80, 5);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> x(-2.0, 202.0), y(-2.0, 162.0), jitter(-3.0, 3.0);
+  int finite = 0;
+  for (int k = 0; k < 500; ++k) {
+    const Eigen::Vector2d pixel1(x(rng), y(rng));
+    const Eigen::Vector2d pixel2 = pixel1 + Eigen::Vector2d(jitter(rng), jitter(rng));
+    for (const int half_window : {2, 5}) {
+      const double fast = Zncc(image1, pixel1, image2, pixel2, half_window);
+      const double reference = ReferenceZncc(image1, pixel1, image2, pixel2, half_window);
+      ASSERT_EQ(std::isnan(fast), std::isnan(reference)) << pixel1.transpose();
+      if (std::isnan(fast)) continue;
+      ++finite;
+      EXPECT_NEAR(fast, reference, 2e-5) << pixel1.transpose() << " / " << pixel2.transpose();
+    }
+  }
+  EXPECT_GT(finite, 600);
+}
+
+// MatchZncc against a brute force over every pair with ReferenceZncc: the same pairs, and the
+// scores to floating-point noise (no subpixel step here, which moves along the score surface).
+TEST(ZnccMatching, SameMatchesAsBruteForce) {
+  const cv::Mat image1 = MakeSyntheticTexture(320, 240, Eigen::Vector2d::Zero(), 200, 13);
+  const cv::Mat image2 = MakeSyntheticTexture(320, 240, Eigen::Vector2d(4.2, -1.6), 200, 13);
+  HarrisOptions harris;
+  std::vector<Eigen::Vector2d> corners1 = Pixels(DetectHarrisCorners(image1, harris));
+  const std::vector<Eigen::Vector2d> corners2 = Pixels(DetectHarrisCorners(image2, harris));
+  ASSERT_GT(corners1.size(), 150u);
+  std::vector<SearchRegion> regions;
+  for (size_t i = 0; i < corners1.size(); ++i)  // various radii, some corners skipped
+    regions.push_back({corners1[i] + Eigen::Vector2d(3.0, -1.0), i % 7 == 0   ? -1.0
+                                                                 : i % 3 == 0 ? 40.0
+                                                                              : 12.0});
+  ZnccOptions options;
+  options.subpixel = false;
+  options.min_zncc = 0.5;
+  const std::vector<ZnccMatch> matches =
+      MatchZncc(image1, corners1, regions, image2, corners2, options);
+
+  std::vector<int> best1(corners1.size(), -1), best2(corners2.size(), -1);
+  std::vector<double> score1(corners1.size(), -2.0), second1(corners1.size(), -2.0),
+      score2(corners2.size(), -2.0);
+  for (size_t i = 0; i < corners1.size(); ++i) {
+    if (regions[i].radius < 0.0) continue;
+    for (size_t j = 0; j < corners2.size(); ++j) {
+      if ((corners2[j] - regions[i].center).norm() > regions[i].radius) continue;
+      const double s = ReferenceZncc(image1, corners1[i], image2, corners2[j], 5);
+      if (std::isnan(s)) continue;
+      if (s > score1[i]) {
+        second1[i] = score1[i];
+        score1[i] = s;
+        best1[i] = static_cast<int>(j);
+      } else if (s > second1[i]) {
+        second1[i] = s;
+      }
+      if (s > score2[j]) {
+        score2[j] = s;
+        best2[j] = static_cast<int>(i);
+      }
+    }
+  }
+  std::vector<std::pair<int, int>> expected;
+  for (size_t i = 0; i < corners1.size(); ++i) {
+    const int j = best1[i];
+    if (j < 0 || score1[i] < options.min_zncc || best2[j] != static_cast<int>(i)) continue;
+    if (second1[i] > -2.0 &&
+        !(std::sqrt(1.0 - score1[i]) < options.max_distance_ratio * std::sqrt(1.0 - second1[i])))
+      continue;
+    expected.emplace_back(static_cast<int>(i), j);
+  }
+  ASSERT_GT(expected.size(), 50u);
+  ASSERT_EQ(matches.size(), expected.size());
+  for (size_t k = 0; k < matches.size(); ++k) {
+    EXPECT_EQ(matches[k].index1, expected[k].first);
+    EXPECT_EQ(matches[k].index2, expected[k].second);
+    EXPECT_NEAR(matches[k].zncc, score1[expected[k].first], 2e-5);
+    EXPECT_EQ(matches[k].pixel2, corners2[expected[k].second]);
+  }
 }
 
 class ZnccShiftTest : public ::testing::TestWithParam<Eigen::Vector2d> {};

@@ -1,13 +1,18 @@
 #include "apps/surface/gt_keyframes.h"
 
 #include <embree3/rtcore.h>
+#include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <random>
 #include <stdexcept>
+#include <unordered_map>
 
+#include "calib/drive.h"
 #include "calib/error.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
@@ -75,6 +80,70 @@ class RayCaster {
   RTCScene scene_ = nullptr;
 };
 
+// The rays of a point p of keyframe t: from the centres of t and of the earlier keyframes (at
+// most max_observing_keyframes) that see p unoccluded within max_distance.
+void AddRays(const RayCaster& caster, const std::vector<Eigen::Vector3d>& centres, size_t t,
+             const Eigen::Vector3d& p, double max_distance, const GtKeyframeOptions& options,
+             SurfacePoint* point) {
+  for (size_t k = t + 1; k-- > 0 && t - k < static_cast<size_t>(options.max_observing_keyframes);) {
+    const Eigen::Vector3d to = p - centres[k];
+    const double dist = to.norm();
+    if (dist > max_distance || dist < 1e-6) continue;
+    const double hit = caster.Cast(centres[k], to / dist, dist * 1.01 + 1e-3);
+    if (hit < dist * (1.0 - 1e-3) - 1e-3) continue;  // occluded
+    point->rays.push_back({KeyframeId(static_cast<uint32_t>(k)), centres[k]});
+  }
+}
+
+// Pose noise of the simulated SfM (own seeded stream, so the points sampled do not change).
+void ApplyPoseNoise(const GtKeyframeOptions& options, std::vector<SurfaceKeyframe>* stream) {
+  if (!(options.pose_noise > 0)) return;
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  std::mt19937_64 pose_rng(options.seed ^ 0x9e3779b97f4a7c15ull);
+  std::vector<Eigen::Vector3d> shift(stream->size());
+  for (size_t t = 0; t < stream->size(); ++t) {
+    shift[t] =
+        options.pose_noise * Eigen::Vector3d(gauss(pose_rng), gauss(pose_rng), gauss(pose_rng));
+    (*stream)[t].centre += shift[t];
+  }
+  for (SurfaceKeyframe& kf : *stream) {
+    for (SurfacePoint& p : kf.points) {
+      for (SurfaceRay& ray : p.rays) ray.origin += shift[ray.keyframe.value];
+    }
+  }
+}
+
+// Points already made, hashed by cells of the merge distance, to find a corner seen again.
+class PointHash {
+ public:
+  explicit PointHash(double cell) : cell_(cell) {}
+  bool HasPointWithin(const Eigen::Vector3d& p) const {
+    const Eigen::Vector3i c = Cell(p);
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto found = cells_.find(Key(c + Eigen::Vector3i(dx, dy, dz)));
+          if (found == cells_.end()) continue;
+          for (const Eigen::Vector3d& q : found->second)
+            if ((q - p).squaredNorm() < cell_ * cell_) return true;
+        }
+    return false;
+  }
+  void Add(const Eigen::Vector3d& p) { cells_[Key(Cell(p))].push_back(p); }
+
+ private:
+  Eigen::Vector3i Cell(const Eigen::Vector3d& p) const {
+    return (p / cell_).array().floor().cast<int>();
+  }
+  static uint64_t Key(const Eigen::Vector3i& c) {
+    return (static_cast<uint64_t>(static_cast<uint32_t>(c.x()) & 0x1fffff) << 42) |
+           (static_cast<uint64_t>(static_cast<uint32_t>(c.y()) & 0x1fffff) << 21) |
+           (static_cast<uint64_t>(static_cast<uint32_t>(c.z()) & 0x1fffff));
+  }
+  double cell_;
+  std::unordered_map<uint64_t, std::vector<Eigen::Vector3d>> cells_;
+};
+
 }  // namespace
 
 std::string GtKeyframeOptions::Check() const {
@@ -87,6 +156,8 @@ std::string GtKeyframeOptions::Check() const {
   if (!(pose_noise >= 0)) return "pose_noise must be >= 0";
   if (!(pose_noise_deg >= 0)) return "pose_noise_deg must be >= 0";
   if (max_keyframes < 0) return "max_keyframes must be >= 0";
+  if (const std::string problem = harris.Check(); !problem.empty()) return "harris." + problem;
+  if (!(corner_merge_distance > 0)) return "corner_merge_distance must be > 0";
   return "";
 }
 
@@ -129,16 +200,7 @@ std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
       const Eigen::Vector3d p = kf.centre + d * dir;
       SurfacePoint point;
       point.id = PointId(next_point);
-      // Rays from the earlier keyframes (and this one) that see p unoccluded.
-      for (size_t k = t + 1;
-           k-- > 0 && t - k < static_cast<size_t>(options.max_observing_keyframes);) {
-        const Eigen::Vector3d to = p - centres[k];
-        const double dist = to.norm();
-        if (dist > max_distance || dist < 1e-6) continue;
-        const double hit = caster.Cast(centres[k], to / dist, dist * 1.01 + 1e-3);
-        if (hit < dist * (1.0 - 1e-3) - 1e-3) continue;  // occluded
-        point.rays.push_back({KeyframeId(static_cast<uint32_t>(k)), centres[k]});
-      }
+      AddRays(caster, centres, t, p, max_distance, options, &point);
       if (static_cast<int>(point.rays.size()) < options.min_rays) continue;
       point.position = p;
       if (options.point_noise > 0) {
@@ -149,20 +211,71 @@ std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
     }
     stream.push_back(std::move(kf));
   }
-  if (options.pose_noise > 0) {
-    std::mt19937_64 pose_rng(options.seed ^ 0x9e3779b97f4a7c15ull);
-    std::vector<Eigen::Vector3d> shift(stream.size());
-    for (size_t t = 0; t < stream.size(); ++t) {
-      shift[t] =
-          options.pose_noise * Eigen::Vector3d(gauss(pose_rng), gauss(pose_rng), gauss(pose_rng));
-      stream[t].centre += shift[t];
+  ApplyPoseNoise(options, &stream);
+  return stream;
+}
+
+std::vector<SurfaceKeyframe> MakeGtKeyframesAtCorners(const TriangleMesh& mesh, const Rig& rig,
+                                                      const std::vector<Rigid3d>& world_from_rig,
+                                                      const GtKeyframeImages& images,
+                                                      const GtKeyframeOptions& options) {
+  const std::string problem = options.Check();
+  if (!problem.empty()) throw std::invalid_argument("GtKeyframeOptions: " + problem);
+  const RayCaster caster(mesh);
+  std::mt19937_64 rng(options.seed);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  const double max_distance = options.max_distance_factor * options.keyframe_spacing;
+  const size_t n = options.max_keyframes > 0
+                       ? std::min(world_from_rig.size(), static_cast<size_t>(options.max_keyframes))
+                       : world_from_rig.size();
+  const Eigen::Vector3d centre_in_rig = rig.CentralCenterInRig();
+  std::vector<Eigen::Vector3d> centres;
+  for (size_t t = 0; t < n; ++t) centres.push_back(world_from_rig[t] * centre_in_rig);
+  PointHash made(options.corner_merge_distance);
+  std::vector<SurfaceKeyframe> stream;
+  uint32_t next_point = 0;
+  for (size_t t = 0; t < n; ++t) {
+    SurfaceKeyframe kf;
+    kf.id = KeyframeId(static_cast<uint32_t>(t));
+    kf.centre = centres[t];
+    // Every corner of every camera (input-image pixels), in a seeded random order.
+    const std::vector<cv::Mat> frame_images = images(t);
+    if (frame_images.size() != rig.NumCameras())
+      throw std::invalid_argument("MakeGtKeyframesAtCorners: expected one image per camera");
+    std::vector<std::pair<int, Eigen::Vector2d>> corners;
+    for (size_t c = 0; c < rig.NumCameras(); ++c) {
+      const cv::Mat prepared = PrepareImage(frame_images[c], options.harris);
+      for (const Corner& corner : DetectHarrisCorners(prepared, options.harris))
+        corners.emplace_back(static_cast<int>(c),
+                             PreparedToInputPixel(corner.pixel, options.harris.downscale));
     }
-    for (SurfaceKeyframe& kf : stream) {
-      for (SurfacePoint& p : kf.points) {
-        for (SurfaceRay& ray : p.rays) ray.origin += shift[ray.keyframe.value];
+    std::shuffle(corners.begin(), corners.end(), rng);
+    for (const auto& [c, pixel] : corners) {
+      if (static_cast<int>(kf.points.size()) >= options.points_per_keyframe) break;
+      const Camera& camera = rig.cameras[c];
+      Eigen::Vector3d bearing;
+      if (!camera.Unproject(pixel, &bearing)) continue;
+      const Rigid3d world_from_cam = world_from_rig[t] * camera.cam_from_rig.Inverse();
+      const Eigen::Vector3d direction = (world_from_cam.rotation * bearing).normalized();
+      const double d = caster.Cast(world_from_cam.translation, direction, max_distance);
+      if (!std::isfinite(d)) continue;
+      const Eigen::Vector3d p = world_from_cam.translation + d * direction;
+      if (made.HasPointWithin(p)) continue;  // a corner seen again: the same track
+      SurfacePoint point;
+      point.id = PointId(next_point);
+      AddRays(caster, centres, t, p, max_distance, options, &point);
+      if (static_cast<int>(point.rays.size()) < options.min_rays) continue;
+      made.Add(p);
+      point.position = p;
+      if (options.point_noise > 0) {
+        point.position += options.point_noise * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
       }
+      ++next_point;
+      kf.points.push_back(std::move(point));
     }
+    stream.push_back(std::move(kf));
   }
+  ApplyPoseNoise(options, &stream);
   return stream;
 }
 
@@ -181,7 +294,35 @@ std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
   const std::vector<size_t> frames = SelectKeyframeFrames(centres, options.keyframe_spacing);
   std::vector<Eigen::Vector3d> keyframe_centres;
   for (size_t frame : frames) keyframe_centres.push_back(centres[frame]);
-  auto stream = MakeGtKeyframes(mesh, keyframe_centres, options);
+  // The corner mode needs the images of the ground-truth frames: a drive whose frames are the
+  // poses of gt/poses.tum, one for one.
+  std::optional<Drive> images;
+  if (options.corner_points && std::filesystem::is_directory(drive / "images")) {
+    images = Drive::Open(drive);
+    if (images->NumFrames() != poses.size()) {
+      spdlog::warn(
+          "{}: {} frames of images but {} ground-truth poses: points sampled uniformly instead "
+          "of at corners",
+          drive.string(), images->NumFrames(), poses.size());
+      images.reset();
+    }
+  }
+  std::vector<SurfaceKeyframe> stream;
+  if (images) {
+    std::vector<Rigid3d> keyframe_world_from_rig;
+    for (size_t frame : frames) keyframe_world_from_rig.push_back(poses[frame].world_from_rig);
+    stream = MakeGtKeyframesAtCorners(
+        mesh, rig, keyframe_world_from_rig,
+        [&](size_t t) {
+          std::vector<cv::Mat> frame_images;
+          for (size_t c = 0; c < rig.NumCameras(); ++c)
+            frame_images.push_back(images->LoadGray(frames[t], c));
+          return frame_images;
+        },
+        options);
+  } else {
+    stream = MakeGtKeyframes(mesh, keyframe_centres, options);
+  }
   if (keyframe_poses) {
     keyframe_poses->clear();
     std::mt19937_64 rng(options.seed ^ 0x5851f42d4c957f2dull);

@@ -3,15 +3,28 @@
 // trajectory and points sampled on the visible ground-truth surface, each with its rays to the
 // earlier keyframes that see it unoccluded (paper §3.3: a point of P_t is observed by keyframes
 // t' ≤ t only). Central rig: every ray starts at the keyframe centre.
+//
+// Two ways of choosing the points of a keyframe:
+//  - corner mode (the default when the drive has images): the rays through the Harris corners
+//    of the keyframe's images (sfm/harris.h, the SfM's detector) are cast from their camera's
+//    centre onto the mesh, so that the points favour textured corners as a Harris-based SfM's
+//    do (issue 6);
+//  - uniform mode (GT-only drives, or corner_points off): random directions from the keyframe
+//    centre.
 
 #include <Eigen/Core>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
 
 #include "calib/ply.h"
+#include "calib/pose.h"
+#include "calib/rig.h"
 #include "calib/tum.h"
+#include "sfm/harris.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -32,6 +45,14 @@ struct GtKeyframeOptions {
   double pose_noise_deg = 0.0;
   int max_keyframes = 0;  // 0: the whole trajectory
   uint64_t seed = 1;
+  // Corner mode: LoadGtKeyframes samples the points at Harris corners of the keyframe images
+  // when the drive has images (uniform directions otherwise, or when this is off).
+  bool corner_points = true;
+  HarrisOptions harris;  // the corner detector (the SfM's defaults)
+  // Corner mode: a corner whose hit is closer than this to an earlier point (of this keyframe
+  // or an earlier one) is that point seen again, as an SfM track would be, not a new point
+  // (metres).
+  double corner_merge_distance = 0.05;
 
   std::string Check() const;
 };
@@ -46,9 +67,25 @@ std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
                                              const std::vector<Eigen::Vector3d>& keyframe_centres,
                                              const GtKeyframeOptions& options);
 
+// The images of keyframe t, one 8-bit grey (or colour) image per camera of the rig.
+using GtKeyframeImages = std::function<std::vector<cv::Mat>(size_t keyframe)>;
+
+// The corner mode: keyframe t has the rig pose world_from_rig[t] (its centre: the rig's
+// central centre) and the images images(t); its points are the first hits on `mesh` of the
+// rays from the camera centres through the Harris corners of its images, taken in a seeded
+// random order until points_per_keyframe are kept, with the rules of MakeGtKeyframes (within
+// max_distance, rays from the keyframes that see the point unoccluded, min_rays, point and pose
+// noise).
+std::vector<SurfaceKeyframe> MakeGtKeyframesAtCorners(const TriangleMesh& mesh, const Rig& rig,
+                                                      const std::vector<Rigid3d>& world_from_rig,
+                                                      const GtKeyframeImages& images,
+                                                      const GtKeyframeOptions& options);
+
 // Reads DRIVE/rig.json, DRIVE/gt/poses.tum and DRIVE/gt/mesh.ply (InputError when missing or
 // malformed) and returns the stream; the centre of a frame is world_from_rig applied to the
-// rig's central centre. keyframe_poses, when given, receives the ground-truth pose of each
+// rig's central centre. With options.corner_points, a drive whose images match gt/poses.tum
+// frame by frame gets the corner mode (images read with calib/drive.h), any other the uniform
+// mode. keyframe_poses, when given, receives the ground-truth pose of each
 // keyframe of the stream (what a perfect SfM would write as poses.tum).
 std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
                                              const GtKeyframeOptions& options,

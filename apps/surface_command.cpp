@@ -127,6 +127,17 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     added += st.points_added;
     rejected += st.points_rejected;
   }
+  size_t filtered[4] = {0, 0, 0, 0};
+  for (const KeyframeStats& st : stats) {
+    filtered[0] += st.points_invalid;
+    filtered[1] += st.points_filtered_ground;
+    filtered[2] += st.points_filtered_length;
+    filtered[3] += st.points_filtered_aperture;
+  }
+  std::printf(
+      "surface: points filtered (paper §5.1): %zu invalid, %zu below the ground, %zu too far, "
+      "%zu narrow aperture\n",
+      filtered[0], filtered[1], filtered[2], filtered[3]);
   const ManifoldReport report = CheckManifold(mesh);
   std::printf(
       "surface: %zu keyframes, %zu points added, %zu rejected (%.2f%%), %zu triangles, "
@@ -163,6 +174,19 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       ->add_option("--enclosing", o->enclosing,
                    "Enclosing set E: ball (paper §4.1) | conflict (conflict zones + margin)")
       ->capture_default_str();
+  command
+      ->add_option("--enclosing-margin", o->sculptor.enclosing_margin,
+                   "conflict E: rings of cells added around the conflict zones")
+      ->capture_default_str();
+  command
+      ->add_option("--enclosing-rounds", o->sculptor.enclosing_rounds,
+                   "conflict E: rounds of widening where O still meets a conflict zone after "
+                   "the shrink (0: the fixed margin only)")
+      ->capture_default_str();
+  command
+      ->add_option("--ray-grid-step", o->sculptor.ray_grid_step_factor,
+                   "Voxel side of the grid of old rays (paper §4.4), in units of s")
+      ->capture_default_str();
   command->add_flag("--no-batch", o->no_batch,
                     "Sculpt the first keyframes one by one instead of in one batch (§5.1)");
   command->add_flag("--no-genus-refinement", o->no_genus_refinement,
@@ -195,6 +219,10 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                    "Write OUT/snapshots/surface_<keyframe>.ply every K keyframes (0: none)")
       ->capture_default_str();
   command->add_option("--seed", o->gt.seed, "Seed of the point sampling")->capture_default_str();
+  command->add_flag_callback(
+      "--uniform-points", [o] { o->gt.corner_points = false; },
+      "--from-gt: sample points in uniform directions, not at the Harris corners "
+      "of the keyframe images (the default when the drive has images)");
   command->callback([o, &global] { RunSurface(*o, global); });
 }
 

@@ -68,6 +68,16 @@ def main():
     rejected = sum(int(r["points_rejected"]) for r in rows)
     print(f"  points added {added}, rejected {rejected} "
           f"({100.0 * rejected / max(1, added + rejected):.2f}%)")
+    filters = ["points_invalid", "points_filtered_ground", "points_filtered_length",
+               "points_filtered_aperture"]
+    if rows and all(k in rows[0] for k in filters):
+        print("  points filtered (paper 5.1): " +
+              ", ".join(f"{k.split('_')[-1]} {sum(int(r[k]) for r in rows)}" for k in filters))
+    if inc and "enclose_rounds" in inc[0]:
+        print(f"  mean per keyframe: widening rounds {statistics.mean(f(r, 'enclose_rounds') for r in inc):.2f}, "
+              f"cells added to E {statistics.mean(f(r, 'cells_e_added') for r in inc):.0f}, "
+              f"active cells {statistics.mean(f(r, 'cells_active') for r in inc):.0f}, "
+              f"smoothing candidates {statistics.mean(f(r, 'smoothing_candidates') for r in inc):.0f}")
 
 
 if __name__ == "__main__":

@@ -44,6 +44,14 @@ void DelaunayMesh::Impl::SetInO(CellHandle c, bool in_o) {
     }
   }
   c->info().in_o = in_o;
+  if (touched) {
+    for (int i = 0; i < 4; ++i) {
+      const VertexHandle v = c->vertex(i);
+      if (v->info().touched == touch_stamp || tri.is_infinite(v)) continue;
+      v->info().touched = touch_stamp;
+      touched->push_back(v);
+    }
+  }
   if (in_o) {
     ++num_o;
   } else {
@@ -52,17 +60,27 @@ void DelaunayMesh::Impl::SetInO(CellHandle c, bool in_o) {
 }
 
 bool DelaunayMesh::Impl::VertexOnSurface(VertexHandle v) const {
+  // A search of the star through the facets containing v that stops as soon as it has met a
+  // cell of O and one outside (CGAL's incident_cells would collect the whole star first).
+  // Visited cells carry a fresh mark (so this is not thread-safe, like any change of T).
   thread_local std::vector<CellHandle> star;
   star.clear();
-  tri.incident_cells(v, std::back_inserter(star));
+  const uint32_t mark = NewMark();
+  star.push_back(v->cell());
+  v->cell()->info().mark = mark;
   bool any_in = false, any_out = false;
-  for (const CellHandle& c : star) {
-    if (c->info().in_o) {
-      any_in = true;
-    } else {
-      any_out = true;
-    }
+  for (size_t s = 0; s < star.size(); ++s) {
+    const CellHandle c = star[s];
+    (c->info().in_o ? any_in : any_out) = true;
     if (any_in && any_out) return true;
+    const int i = c->index(v);
+    for (int k = 0; k < 4; ++k) {
+      if (k == i) continue;
+      const CellHandle n = c->neighbor(k);
+      if (n->info().mark == mark) continue;
+      n->info().mark = mark;
+      star.push_back(n);
+    }
   }
   return false;
 }

@@ -42,6 +42,8 @@ std::string SculptorOptions::Check() const {
   if (init_keyframes < 1) return "init_keyframes must be >= 1";
   if (max_vertex_passes < 0) return "max_vertex_passes must be >= 0";
   if (enclosing_margin < 0) return "enclosing_margin must be >= 0";
+  if (enclosing_rounds < 0) return "enclosing_rounds must be >= 0";
+  if (enclosing_round_rings < 1) return "enclosing_round_rings must be >= 1";
   if (!(ray_grid_step_factor > 0.0)) return "ray_grid_step_factor must be > 0";
   for (const std::string& problem : {genus.Check(), smoothing.Check()}) {
     if (!problem.empty()) return problem;
@@ -55,7 +57,9 @@ std::string KeyframeStatsCsvHeader() {
          "cells_f,cells_o,triangles,ms_steiner,ms_enclose,ms_shrink,ms_insert,ms_rays,ms_grow,"
          "ms_total,genus_free_before,genus_free_after,genus_groups,genus_euler_change,"
          "smoothed_vertices,smoothing_rejected,ms_genus,ms_smooth,rays_old_candidates,"
-         "old_walk_cells,ms_rays_select,ms_rays_old";
+         "old_walk_cells,ms_rays_select,ms_rays_old,points_invalid,points_filtered_ground,"
+         "points_filtered_length,points_filtered_aperture,enclose_rounds,cells_e_added,"
+         "cells_active,smoothing_candidates";
 }
 
 std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
@@ -70,7 +74,9 @@ std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
     << s.genus_groups << ',' << s.genus_euler_change << ',' << s.smoothed_vertices << ','
     << s.smoothing_rejected << ',' << s.ms_genus << ',' << s.ms_smooth << ','
     << s.rays_old_candidates << ',' << s.old_walk_cells << ',' << s.ms_rays_select << ','
-    << s.ms_rays_old;
+    << s.ms_rays_old << ',' << s.points_invalid << ',' << s.points_filtered_ground << ','
+    << s.points_filtered_length << ',' << s.points_filtered_aperture << ',' << s.enclose_rounds
+    << ',' << s.cells_e_added << ',' << s.cells_active << ',' << s.smoothing_candidates;
   return o.str();
 }
 
@@ -131,6 +137,7 @@ struct IncrementalSculptor::Impl {
   std::vector<KeyframeRecord> keyframes;
   uint32_t stamp = 0;  // processing index of the current keyframe (the creation date)
   std::vector<VertexHandle> new_vertices;  // inserted during the current keyframe
+  std::vector<VertexHandle> touched;       // vertices of cells that changed side (SetInO)
   internal::SurfaceSmoother smoother;      // step 6: smoothed δO positions
   // Old rays (§4.4): the point of each ray id, the rays traced so far in their voxels (ids
   // below num_registered_rays), and a per-ray scratch stamp.
@@ -178,26 +185,28 @@ struct IncrementalSculptor::Impl {
     std::vector<const SurfacePoint*> kept;
     const double cos_min = std::cos(options.min_aperture_deg * M_PI / 180.0);
     const Eigen::Vector3d up = options.up.normalized();
-    for (const SurfacePoint& p : kf.points) {
-      bool ok = p.position.allFinite() && !p.rays.empty();
-      if (ok && options.filter_points) {
-        const Eigen::Vector3d d = p.position - kf.centre;
-        if (d.dot(up) < -options.below_ground_factor * s) ok = false;
-        if (d.norm() > r) ok = false;
-        bool aperture = false;
-        for (size_t i = 0; i < p.rays.size() && !aperture; ++i) {
-          const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
-          for (size_t j = i + 1; j < p.rays.size() && !aperture; ++j) {
-            const Eigen::Vector3d b = (p.rays[j].origin - p.position).normalized();
-            if (a.dot(b) < cos_min) aperture = true;
-          }
+    // Each point is counted by the first filter that removes it.
+    auto removed_by = [&](const SurfacePoint& p) -> size_t* {
+      if (!p.position.allFinite() || p.rays.empty()) return &st.points_invalid;
+      if (!options.filter_points) return nullptr;
+      const Eigen::Vector3d d = p.position - kf.centre;
+      if (d.dot(up) < -options.below_ground_factor * s) return &st.points_filtered_ground;
+      if (d.norm() > r) return &st.points_filtered_length;
+      for (size_t i = 0; i < p.rays.size(); ++i) {
+        const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
+        for (size_t j = i + 1; j < p.rays.size(); ++j) {
+          const Eigen::Vector3d b = (p.rays[j].origin - p.position).normalized();
+          if (a.dot(b) < cos_min) return nullptr;
         }
-        if (!aperture) ok = false;
       }
-      if (ok) {
-        kept.push_back(&p);
-      } else {
+      return &st.points_filtered_aperture;
+    };
+    for (const SurfacePoint& p : kf.points) {
+      if (size_t* count = removed_by(p)) {
+        ++*count;
         ++st.points_filtered;
+      } else {
+        kept.push_back(&p);
       }
     }
     return kept;
@@ -205,7 +214,8 @@ struct IncrementalSculptor::Impl {
 
   // Inserts p unless its conflict zone meets O (§4.3). Returns the new vertex, or a null handle
   // (rejected) with *duplicate telling whether p is an existing vertex.
-  VertexHandle InsertFree(const Point& p, CellHandle& hint, bool* duplicate) {
+  VertexHandle InsertFree(const Point& p, CellHandle& hint, bool* duplicate,
+                          KeyframeStats* verify_stats = nullptr) {
     *duplicate = false;
     if (t.tri.dimension() < 3) {  // no cell yet, so no O: plain insertion
       const size_t before = t.tri.number_of_vertices();
@@ -234,6 +244,14 @@ struct IncrementalSculptor::Impl {
     for (const CellHandle& k : conflicts) {
       if (k->info().in_o) return VertexHandle();
       if (k->info().counter > 0 && !t.tri.is_infinite(k)) ++in_f;
+    }
+    if (options.verify_insertions && verify_stats) {
+      for (auto k : t.tri.finite_cell_handles()) {
+        if (k->info().in_o && t.tri.side_of_sphere(k, p, true) == CGAL::ON_BOUNDED_SIDE) {
+          ++verify_stats->insertions_meeting_o;
+          break;
+        }
+      }
     }
     t.num_f -= in_f;  // F ← F \ D(p)
     const VertexHandle v =
@@ -290,7 +308,8 @@ struct IncrementalSculptor::Impl {
       return !t.tri.is_infinite(v) && CGAL::squared_distance(v->point(), pc) <= r2;
     };
     std::vector<CellHandle> stack = {start};
-    std::unordered_set<CellHandle, std::hash<CellHandle>> seen = {start};
+    const uint32_t mark = t.NewMark();
+    start->info().mark = mark;
     while (!stack.empty()) {
       const CellHandle c = stack.back();
       stack.pop_back();
@@ -304,7 +323,9 @@ struct IncrementalSculptor::Impl {
       if (n_in == 0 && c != start) continue;
       for (int i = 0; i < 4; ++i) {
         const CellHandle nb = c->neighbor(i);
-        if (seen.insert(nb).second) stack.push_back(nb);
+        if (nb->info().mark == mark) continue;
+        nb->info().mark = mark;
+        stack.push_back(nb);
       }
     }
     return inside;
@@ -329,7 +350,10 @@ struct IncrementalSculptor::Impl {
       if (lt == internal::Delaunay::VERTEX) continue;
       zone.clear();
       t.tri.find_conflicts(p, c, CGAL::Emptyset_iterator(), std::back_inserter(zone));
-      for (const CellHandle& k : zone) add(k);
+      for (const CellHandle& k : zone) {
+        k->info().d_stamp = stamp;
+        add(k);
+      }
     }
     size_t ring_begin = 0;
     for (int ring = 0; ring < margin; ++ring) {
@@ -342,18 +366,53 @@ struct IncrementalSculptor::Impl {
     return cells;
   }
 
+  // kConflictZones: the cells of O within `rings` adjacency steps through O of the cells of O
+  // left in D by the shrink join E (e_stamp). Returns the cells added to E.
+  std::vector<CellHandle> WidenEnclosing(const std::vector<CellHandle>& e_cells, int rings) {
+    std::vector<CellHandle> frontier, next, added;
+    const uint32_t mark = t.NewMark();
+    for (const CellHandle& c : e_cells) {
+      if (c->info().in_o && c->info().d_stamp == stamp) {
+        c->info().mark = mark;
+        frontier.push_back(c);
+      }
+    }
+    for (int ring = 0; ring < rings && !frontier.empty(); ++ring) {
+      next.clear();
+      for (const CellHandle& c : frontier) {
+        for (int k = 0; k < 4; ++k) {
+          const CellHandle nb = c->neighbor(k);
+          if (!nb->info().in_o || nb->info().mark == mark) continue;
+          nb->info().mark = mark;
+          next.push_back(nb);
+          if (nb->info().e_stamp != stamp) {
+            nb->info().e_stamp = stamp;
+            added.push_back(nb);
+          }
+        }
+      }
+      frontier.swap(next);
+    }
+    return added;
+  }
+
   // The cells where O may grow in this keyframe: E (what survived of it), N and the cells
   // crossed by new rays, found by a search from N and from the surviving cells of `seeds`.
   std::vector<CellHandle> ActiveCells(const std::vector<CellHandle>& n_cells,
                                       const std::vector<CellHandle>& seeds) {
     std::vector<CellHandle> active;
-    std::unordered_set<CellHandle, std::hash<CellHandle>> seen;
+    const uint32_t mark = t.NewMark();
+    auto first_visit = [mark](CellHandle c) {
+      if (c->info().mark == mark) return false;
+      c->info().mark = mark;
+      return true;
+    };
     std::vector<CellHandle> stack;
     for (const CellHandle& c : n_cells) {
-      if (seen.insert(c).second) stack.push_back(c);
+      if (first_visit(c)) stack.push_back(c);
     }
     for (const CellHandle& c : seeds) {
-      if (Active(c) && seen.insert(c).second) stack.push_back(c);
+      if (Active(c) && first_visit(c)) stack.push_back(c);
     }
     while (!stack.empty()) {
       const CellHandle c = stack.back();
@@ -361,7 +420,7 @@ struct IncrementalSculptor::Impl {
       active.push_back(c);
       for (int i = 0; i < 4; ++i) {
         const CellHandle nb = c->neighbor(i);
-        if (Active(nb) && seen.insert(nb).second) stack.push_back(nb);
+        if (Active(nb) && first_visit(nb)) stack.push_back(nb);
       }
     }
     return active;
@@ -689,11 +748,14 @@ struct IncrementalSculptor::Impl {
     return kf.points.back();
   }
 
-  // ---- One keyframe, paper §4 steps 1–5 (step 6, handle removal and smoothing, is not here) ----
+  // ---- One keyframe, paper §4 steps 1–6 ----
   KeyframeStats Incremental(const SurfaceKeyframe& kf) {
     const auto start = Clock::now();
     ++stamp;
     new_vertices.clear();
+    touched.clear();
+    t.touched = &touched;
+    t.touch_stamp = stamp;
     KeyframeStats st;
     st.keyframe = kf.id;
     st.points_in = kf.points.size();
@@ -703,7 +765,7 @@ struct IncrementalSculptor::Impl {
     st.steiner_added = MaterialiseGrid(kf.centre);
     st.ms_steiner = MsSince(tick);
 
-    // Step 1: E = cells in B_{r+l}(c_{t+1}).
+    // Step 1: E = cells in B_{r+l}(c_{t+1}), or the conflict zones of the points plus a margin.
     tick = Clock::now();
     std::vector<Point> kept_points;
     for (const SurfacePoint* p : kept) kept_points.push_back(ToCgal(p->position));
@@ -714,10 +776,46 @@ struct IncrementalSculptor::Impl {
     st.cells_e = e_cells.size();
     st.ms_enclose = MsSince(tick);
 
-    // Step 2: shrink O out of E.
+    // Step 2: shrink O out of E; with the conflict zones, widen E where O still meets D and
+    // shrink again.
     tick = Clock::now();
-    Shrink(e_cells);
-    for (const CellHandle& c : e_cells) st.o_left_in_e += c->info().in_o ? 1 : 0;
+    std::vector<CellHandle> e_all = e_cells;
+    Shrink(e_all);
+    if (options.enclosing == EnclosingMode::kConflictZones) {
+      // D is computed in T before any insertion, so it over-covers the zones met at insertion
+      // time (an insertion removes cells that later points conflicted with), and a round may
+      // leave as many cells of O in D as the one before and the next one still remove them
+      // (stopping there doubled the rejected share on the street test): all rounds run while
+      // O meets D.
+      auto o_in_d = [&] {
+        size_t n = 0;
+        for (const CellHandle& c : e_all) n += c->info().in_o && c->info().d_stamp == stamp;
+        return n;
+      };
+      size_t left = o_in_d();
+      for (int round = 0; round < options.enclosing_rounds && left > 0; ++round) {
+        // The first rings may all be in E already (the margin): then the next round reaches
+        // farther.
+        const std::vector<CellHandle> added = WidenEnclosing(
+            e_all, options.enclosing_margin + (options.enclosing_round_rings << round));
+        ++st.enclose_rounds;
+        if (added.empty()) continue;
+        st.cells_e_added += added.size();
+        e_all.insert(e_all.end(), added.begin(), added.end());
+        Shrink(e_all);
+        left = o_in_d();
+      }
+    }
+    for (const CellHandle& c : e_all) st.o_left_in_e += c->info().in_o ? 1 : 0;
+    st.cells_e = e_all.size();
+    // The cells of E out of every conflict zone survive the insertions (a cell is destroyed by
+    // a point only if the point is in its circumsphere, i.e. the cell is in that point's D).
+    std::vector<CellHandle> surviving;
+    if (options.enclosing == EnclosingMode::kConflictZones) {
+      for (const CellHandle& c : e_all) {
+        if (c->info().d_stamp != stamp) surviving.push_back(c);
+      }
+    }
     st.ms_shrink = MsSince(tick);
 
     // Step 3: insert the points whose conflict zone misses O.
@@ -729,7 +827,7 @@ struct IncrementalSculptor::Impl {
     CellHandle hint = t.tri.locate(ToCgal(kf.centre));
     for (const auto& [pt, p] : sorted) {
       bool duplicate;
-      const VertexHandle v = InsertFree(pt, hint, &duplicate);
+      const VertexHandle v = InsertFree(pt, hint, &duplicate, &st);
       if (v == VertexHandle()) {
         ++(duplicate ? st.points_duplicate : st.points_rejected);
         continue;
@@ -757,13 +855,24 @@ struct IncrementalSculptor::Impl {
 
     // Step 5: grow O in F, within E (recomputed: insertion replaced cells) and N.
     tick = Clock::now();
-    std::vector<CellHandle> ball;
-    if (options.enclosing == EnclosingMode::kBall) ball = CellsInBall(kf.centre, r + l);
-    const std::vector<CellHandle> active = ActiveCells(n_cells, ball);
+    if (options.enclosing == EnclosingMode::kBall) surviving = CellsInBall(kf.centre, r + l);
+    const std::vector<CellHandle> active = ActiveCells(n_cells, surviving);
+    st.cells_active = active.size();
     Grow(active);
     st.ms_grow = MsSince(tick);
 
-    PostProcess(active, kf.centre, r + l, st);  // step 6
+    // Step 6 on the δO vertices whose umbrella may have changed: those of the cells that
+    // changed side (recorded by SetInO) and those of N (their stars changed).
+    for (const CellHandle& c : n_cells) {
+      for (int i = 0; i < 4; ++i) {
+        const VertexHandle v = c->vertex(i);
+        if (t.tri.is_infinite(v) || v->info().touched == stamp) continue;
+        v->info().touched = stamp;
+        touched.push_back(v);
+      }
+    }
+    PostProcess(active, &touched, kf.centre, r + l, st);  // step 6
+    t.touched = nullptr;
 
     FinishStats(st);
     st.ms_total = MsSince(start);
@@ -822,7 +931,8 @@ struct IncrementalSculptor::Impl {
     tick = Clock::now();
     Grow(all);
     st.ms_grow = MsSince(tick);
-    PostProcess(all, kfs.back().centre, std::numeric_limits<double>::infinity(), st);  // step 6
+    PostProcess(all, nullptr, kfs.back().centre, std::numeric_limits<double>::infinity(),
+                st);  // step 6
     FinishStats(st);
     st.ms_total = MsSince(start);
     return st;
@@ -830,16 +940,12 @@ struct IncrementalSculptor::Impl {
 
   // ---- Step 6 (§4.6): genus refinement and smoothing, in surface/genus_refinement.cpp and
   // surface/smoothing.cpp (STEP6, issue 7) ----
-  void PostProcess(const std::vector<CellHandle>& active, const Eigen::Vector3d& centre,
-                   double radius, KeyframeStats& st) {
+  // `vertices`: the vertices whose δO umbrella may have changed (nullptr: those of `active`).
+  void PostProcess(const std::vector<CellHandle>& active, std::vector<VertexHandle>* vertices,
+                   const Eigen::Vector3d& centre, double radius, KeyframeStats& st) {
     auto tick = Clock::now();
-    // With the conflict-zone E the next keyframe's shrinking cannot undo the handles opened
-    // here (measured on the street test: 2.1 % of the points rejected without, 5.9 % with), so
-    // the refinement needs the paper's ball.
-    GenusRefinementOptions genus_options = options.genus;
-    if (options.enclosing != EnclosingMode::kBall) genus_options.enabled = false;
     const internal::GenusRefinementResult genus = internal::RefineGenus(
-        t, active, [this](CellHandle c) { return Active(c); }, genus_options);
+        t, active, [this](CellHandle c) { return Active(c); }, options.genus);
     st.genus_free_before = genus.free_before;
     st.genus_free_after = genus.free_after;
     st.genus_groups = genus.groups;
@@ -847,8 +953,14 @@ struct IncrementalSculptor::Impl {
     st.ms_genus = MsSince(tick);
     if (!options.smoothing.enabled) return;
     tick = Clock::now();
+    if (vertices) {
+      st.smoothing_candidates = vertices->size();
+    } else {
+      st.smoothing_candidates = t.vertices.size();
+    }
     const internal::SmoothingResult smoothing =
-        smoother.Update(t, active, centre, radius, options.smoothing);
+        vertices ? smoother.UpdateVertices(t, *vertices, centre, radius, options.smoothing)
+                 : smoother.Update(t, active, centre, radius, options.smoothing);
     st.smoothed_vertices = smoothing.vertices;
     st.smoothing_rejected = smoothing.rejected;
     st.ms_smooth = MsSince(tick);

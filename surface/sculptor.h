@@ -38,7 +38,8 @@ struct SurfaceKeyframe {
 enum class EnclosingMode {
   kBall,           // the paper: the cells inside B_{r+l}(c_{t+1})
   kConflictZones,  // the paper's future work (§6): the union D of the conflict zones of the new
-                   // points (found without inserting them) plus enclosing_margin rings of cells
+                   // points (found without inserting them) plus enclosing_margin rings of cells,
+                   // widened after the shrink where O still meets D (enclosing_rounds)
 };
 
 // Step 6 of paper §4.6, first part: genus refinement ("handle removal", ref. [21]) of O ∩ E.
@@ -46,7 +47,7 @@ enum class EnclosingMode {
 // every vertex of the group, rolled back on failure), most crossed cells first: the cells around
 // an edge, then connected groups of F \ O. No Steiner point is added (T stays Delaunay, §4.6).
 struct GenusRefinementOptions {
-  bool enabled = true;       // with EnclosingMode::kBall only (see IncrementalSculptor's step 6)
+  bool enabled = true;       // on the cells of E ∪ N ∪ the cells crossed by new rays
   bool edge_stars = true;    // try the F \ O cells around each edge at once
   int max_group_cells = 32;  // largest connected group of F \ O cells tried at once (0: none)
   std::string Check() const;
@@ -111,6 +112,13 @@ struct SculptorOptions {
   bool batch_init = true;
   EnclosingMode enclosing = EnclosingMode::kBall;
   int enclosing_margin = 2;  // kConflictZones: rings of neighbouring cells added around D
+  // kConflictZones: where the shrink left cells of O in D (it is blocked by the manifold tests,
+  // e.g. when emptying D needs a genus change of δO), E is widened by the cells of O within
+  // enclosing_margin + enclosing_round_rings · 2^k steps through O of those cells (k = 0, 1, ...)
+  // and O shrunk again, at most enclosing_rounds times; the points whose conflict zone still meets
+  // O are then rejected (§4.3).
+  int enclosing_rounds = 4;
+  int enclosing_round_rings = 2;
   // Re-tracing of the old rays over the new cells N (§4.4); every mode gives the same counters.
   OldRayTracing old_rays = OldRayTracing::kNewCellRuns;
   // Voxel side of the grid that holds the old rays and the border of N, in units of s.
@@ -118,6 +126,11 @@ struct SculptorOptions {
   // Several-at-once passes (paper §4.5, §4.7): at most this many sweeps over the vertices of
   // the enclosing set per keyframe.
   int max_vertex_passes = 4;
+  // For tests: before each insertion, every cell of O is tested for conflict with the point
+  // by brute force (the point in its circumsphere, CGAL's perturbed predicate), independently of
+  // the conflict-zone search, and the insertions that meet O are counted
+  // (KeyframeStats::insertions_meeting_o). Costs O(|O|) per point.
+  bool verify_insertions = false;
   // Step 6 (paper §4.6).
   GenusRefinementOptions genus;
   SmoothingOptions smoothing;
@@ -130,7 +143,7 @@ struct KeyframeStats {
   KeyframeId keyframe;
   bool batch = false;
   size_t points_in = 0;         // points received
-  size_t points_filtered = 0;   // removed by the §5.1 filters
+  size_t points_filtered = 0;   // removed by the §5.1 filters: the sum of the four below
   size_t points_added = 0;      // inserted in T
   size_t points_rejected = 0;   // conflict zone met O (§4.3)
   size_t points_duplicate = 0;  // equal to an existing vertex
@@ -156,6 +169,19 @@ struct KeyframeStats {
   // visited by the re-traced old rays, and the milliseconds of the selection and of their walks.
   size_t rays_old_candidates = 0, old_walk_cells = 0;
   double ms_rays_select = 0, ms_rays_old = 0;
+  // The §5.1 filters one by one, each point counted by the first that removes it, in this order:
+  // not usable (a non-finite position or no ray), below the ground ((p − c_t)·v < −3 s), too far
+  // (‖p − c_t‖ > 15 s), aperture (no two rays more than 10° apart).
+  size_t points_invalid = 0, points_filtered_ground = 0, points_filtered_length = 0,
+         points_filtered_aperture = 0;
+  // kConflictZones: widening rounds of E done after the first shrink, and the cells they added.
+  size_t enclose_rounds = 0, cells_e_added = 0;
+  // Step 6 work: the cells given to the genus refinement, the δO vertices examined by the
+  // smoothing (those whose umbrella may have changed).
+  size_t cells_active = 0, smoothing_candidates = 0;
+  // With SculptorOptions::verify_insertions: points inserted although their conflict zone met O
+  // (must be 0, §4.3). Not in the CSV row.
+  size_t insertions_meeting_o = 0;
 };
 
 std::string KeyframeStatsCsvHeader();

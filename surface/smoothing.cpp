@@ -105,21 +105,30 @@ SmoothingResult SurfaceSmoother::Update(const DelaunayMesh::Impl& t,
                                         const std::vector<CellHandle>& region,
                                         const Eigen::Vector3d& centre, double radius,
                                         const SmoothingOptions& options) {
-  SmoothingResult result;
-  const double radius2 = radius * radius;
-  auto in_ball = [&](VertexHandle v) {
-    return (ToEigen(v->point()) - centre).squaredNorm() < radius2;
-  };
-  // The vertices of the region, by index.
+  // The vertices of the region.
   std::vector<VertexHandle> vertices;
   for (const CellHandle& c : region) {
     for (int i = 0; i < 4; ++i) {
       if (!t.tri.is_infinite(c->vertex(i))) vertices.push_back(c->vertex(i));
     }
   }
+  std::sort(vertices.begin(), vertices.end());
+  vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
+  return UpdateVertices(t, std::move(vertices), centre, radius, options);
+}
+
+SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
+                                                std::vector<VertexHandle> vertices,
+                                                const Eigen::Vector3d& centre, double radius,
+                                                const SmoothingOptions& options) {
+  SmoothingResult result;
+  const double radius2 = radius * radius;
+  auto in_ball = [&](VertexHandle v) {
+    return (ToEigen(v->point()) - centre).squaredNorm() < radius2;
+  };
+  // By index, so that runs are reproducible (addresses are not).
   std::sort(vertices.begin(), vertices.end(),
             [](VertexHandle a, VertexHandle b) { return a->info().index < b->info().index; });
-  vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
 
   std::unordered_map<int, Local> set;  // the vertices recomputed, by index
   std::vector<int> order;              // their indices, in a reproducible order
@@ -264,49 +273,67 @@ SmoothingResult SurfaceSmoother::Update(const DelaunayMesh::Impl& t,
   // Local intersections: the triangles around each vertex that moved against the δO triangles
   // of the cells around it and its neighbours.
   auto meets_nearby = [&](const Local& local) {
-    thread_local std::vector<CellHandle> star;
-    std::vector<std::array<VertexHandle, 3>> nearby;
-    std::vector<VertexHandle> around = local.ring;
-    around.push_back(local.v);
-    for (const VertexHandle& w : around) {
+    // The cells around v and its ring, each once (sorted handles), then their δO facets: each
+    // δO facet is seen once from its cell in O.
+    thread_local std::vector<CellHandle> star, cells;
+    cells.clear();
+    auto add_star = [&](VertexHandle w) {
       star.clear();
       t.tri.incident_cells(w, std::back_inserter(star));
       for (const CellHandle& c : star) {
-        if (!c->info().in_o) continue;
-        for (int k = 0; k < 4; ++k) {
-          if (c->neighbor(k)->info().in_o) continue;
-          std::array<VertexHandle, 3> tri = {c->vertex((k + 1) & 3), c->vertex((k + 2) & 3),
-                                             c->vertex((k + 3) & 3)};
-          std::sort(tri.begin(), tri.end());
-          if (std::find(nearby.begin(), nearby.end(), tri) == nearby.end()) nearby.push_back(tri);
-        }
+        if (c->info().in_o) cells.push_back(c);
       }
-    }
+    };
+    add_star(local.v);
+    for (const VertexHandle& w : local.ring) add_star(w);
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    // The umbrella at the new positions and its bounding box: a triangle whose box misses it
+    // cannot meet it.
     const Point x = ToCgal(local.x);
+    Eigen::AlignedBox3d umbrella_box(local.x);
     for (const UmbrellaTriangle& tr : local.umbrella) {
-      const VertexHandle mine[3] = {local.v, tr.a, tr.b};
-      const Point p[3] = {x, ToCgal(position(tr.a)), ToCgal(position(tr.b))};
-      const Kernel::Triangle_3 triangle(p[0], p[1], p[2]);
-      for (const auto& other : nearby) {
-        int shared = 0, shared_mine = -1, shared_other = -1;
-        for (int i = 0; i < 3; ++i) {
-          for (int j = 0; j < 3; ++j) {
-            if (mine[i] == other[j]) ++shared, shared_mine = i, shared_other = j;
+      umbrella_box.extend(position(tr.a));
+      umbrella_box.extend(position(tr.b));
+    }
+    const double pad =
+        1e-9 * (1.0 + umbrella_box.diagonal().norm() + umbrella_box.max().cwiseAbs().maxCoeff());
+    umbrella_box.extend(umbrella_box.max() + Eigen::Vector3d::Constant(pad));
+    umbrella_box.extend(umbrella_box.min() - Eigen::Vector3d::Constant(pad));
+    for (const CellHandle& c : cells) {
+      for (int k = 0; k < 4; ++k) {
+        if (c->neighbor(k)->info().in_o) continue;
+        const VertexHandle other[3] = {c->vertex((k + 1) & 3), c->vertex((k + 2) & 3),
+                                       c->vertex((k + 3) & 3)};
+        const Eigen::Vector3d e[3] = {position(other[0]), position(other[1]), position(other[2])};
+        Eigen::AlignedBox3d box(e[0]);
+        box.extend(e[1]);
+        box.extend(e[2]);
+        if (!box.intersects(umbrella_box)) continue;
+        const Point q[3] = {ToCgal(e[0]), ToCgal(e[1]), ToCgal(e[2])};
+        const Kernel::Triangle_3 other_triangle(q[0], q[1], q[2]);
+        for (const UmbrellaTriangle& tr : local.umbrella) {
+          const VertexHandle mine[3] = {local.v, tr.a, tr.b};
+          int shared = 0, shared_mine = -1, shared_other = -1;
+          for (int i = 0; i < 3; ++i) {
+            for (int j = 0; j < 3; ++j) {
+              if (mine[i] == other[j]) ++shared, shared_mine = i, shared_other = j;
+            }
           }
-        }
-        if (shared >= 2) continue;  // neighbours across an edge: the flip test's business
-        const Point q[3] = {ToCgal(position(other[0])), ToCgal(position(other[1])),
-                            ToCgal(position(other[2]))};
-        if (shared == 0) {
-          if (CGAL::do_intersect(triangle, Kernel::Triangle_3(q[0], q[1], q[2]))) return true;
-          continue;
-        }
-        // One shared vertex: the far edge of each triangle must miss the other.
-        const Kernel::Segment_3 far_other(q[(shared_other + 1) % 3], q[(shared_other + 2) % 3]);
-        const Kernel::Segment_3 far_mine(p[(shared_mine + 1) % 3], p[(shared_mine + 2) % 3]);
-        if (CGAL::do_intersect(far_other, triangle) ||
-            CGAL::do_intersect(far_mine, Kernel::Triangle_3(q[0], q[1], q[2]))) {
-          return true;
+          if (shared >= 2) continue;  // neighbours across an edge: the flip test's business
+          const Point p[3] = {x, ToCgal(position(tr.a)), ToCgal(position(tr.b))};
+          const Kernel::Triangle_3 triangle(p[0], p[1], p[2]);
+          if (shared == 0) {
+            if (CGAL::do_intersect(triangle, other_triangle)) return true;
+            continue;
+          }
+          // One shared vertex: the far edge of each triangle must miss the other.
+          const Kernel::Segment_3 far_other(q[(shared_other + 1) % 3], q[(shared_other + 2) % 3]);
+          const Kernel::Segment_3 far_mine(p[(shared_mine + 1) % 3], p[(shared_mine + 2) % 3]);
+          if (CGAL::do_intersect(far_other, triangle) ||
+              CGAL::do_intersect(far_mine, other_triangle)) {
+            return true;
+          }
         }
       }
     }

@@ -25,6 +25,7 @@ struct VertexInfo {
   int index = -1;        // DelaunayMesh vertex index (position in Impl::vertices)
   int32_t point = -1;    // caller's point index; -1 for Steiner vertices
   bool steiner = false;  // a vertex of the Steiner grid (paper §3.3)
+  uint32_t touched = 0;  // equal to DelaunayMesh::Impl::touch_stamp when recorded in `touched`
 };
 
 struct CellInfo {
@@ -32,6 +33,8 @@ struct CellInfo {
   uint32_t date = 0;       // creation date: the stamp of the keyframe that created it (§4.3)
   uint32_t e_stamp = 0;    // equal to the current stamp when the cell is in E (§4.1)
   uint32_t ray_stamp = 0;  // equal to the current stamp when a new ray crossed the cell
+  uint32_t d_stamp = 0;    // equal to the current stamp when the cell is in a conflict zone D
+  uint32_t mark = 0;       // scratch visit mark of searches (DelaunayMesh::Impl::NewMark)
   bool in_o = false;       // the cell is in O (free space carved so far, O ⊆ F)
   bool queued = false;     // scratch flag of the priority-queue passes
 };
@@ -61,6 +64,22 @@ struct DelaunayMesh::Impl {
   size_t num_o = 0;                              // cells in O
   size_t num_f = 0;                              // finite cells with counter > 0
   size_t num_triangles = 0;                      // triangles of δO
+  // Scratch marks: a search takes a fresh value and compares CellInfo::mark with it (no set).
+  // A search that relies on its marks must not run another one meanwhile (VertexOnSurface,
+  // hence the manifold tests, mark cells too).
+  // (On wrap-around every mark is cleared.) Not thread-safe.
+  mutable uint32_t mark_counter = 0;
+  uint32_t NewMark() const {
+    if (++mark_counter == 0) {
+      for (auto c : const_cast<internal::Delaunay&>(tri).all_cell_handles()) c->info().mark = 0;
+      mark_counter = 1;
+    }
+    return mark_counter;
+  }
+  // When set, SetInO appends the (finite) vertices of every cell it flips, once per touch_stamp:
+  // the vertices whose δO umbrella may have changed (step 6 smoothing works on them).
+  std::vector<internal::VertexHandle>* touched = nullptr;
+  uint32_t touch_stamp = 0;
 
   internal::VertexHandle AddVertex(internal::VertexHandle v, int32_t point, bool steiner);
 

@@ -41,6 +41,11 @@ class SurfaceSmoother {
   SmoothingResult Update(const DelaunayMesh::Impl& t, const std::vector<CellHandle>& region,
                          const Eigen::Vector3d& centre, double radius,
                          const SmoothingOptions& options);
+  // The same on the given vertices (any order, no duplicate) instead of those of a region:
+  // the caller names the vertices whose umbrella may have changed.
+  SmoothingResult UpdateVertices(const DelaunayMesh::Impl& t, std::vector<VertexHandle> vertices,
+                                 const Eigen::Vector3d& centre, double radius,
+                                 const SmoothingOptions& options);
   // δO at the smoothed positions, triangles counter-clockwise seen from O.
   TriangleMesh Extract(const DelaunayMesh::Impl& t) const;
   Eigen::Vector3d Position(VertexHandle v) const;

@@ -58,7 +58,8 @@ const char* const kColumns =
     "triangles,ms_steiner,ms_enclose,ms_shrink,ms_insert,ms_rays,ms_grow,ms_total,"
     "genus_free_before,genus_free_after,genus_groups,genus_euler_change,smoothed_vertices,"
     "smoothing_rejected,ms_genus,ms_smooth,rays_old_candidates,old_walk_cells,ms_rays_select,"
-    "ms_rays_old";
+    "ms_rays_old,points_invalid,points_filtered_ground,points_filtered_length,"
+    "points_filtered_aperture,enclose_rounds,cells_e_added,cells_active,smoothing_candidates";
 
 TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPerKeyframe) {
   const fs::path drive = dir_->path() / "drive";
@@ -108,6 +109,9 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
     EXPECT_EQ(field("batch"), 0.0);
     EXPECT_EQ(field("points_in"), field("points_filtered") + field("points_added") +
                                       field("points_rejected") + field("points_duplicate"));
+    EXPECT_EQ(field("points_filtered"), field("points_invalid") + field("points_filtered_ground") +
+                                            field("points_filtered_length") +
+                                            field("points_filtered_aperture"));
     EXPECT_LE(field("cells_o"), field("cells_f"));
     EXPECT_LE(field("cells_f"), field("cells_t"));
     EXPECT_GT(field("cells_e"), 0.0);

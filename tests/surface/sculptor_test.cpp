@@ -147,9 +147,8 @@ TEST(IncrementalSculptor, StreetStaysManifoldAfterEveryKeyframeIncrementalAndBat
               << ", sculpting " << run.sculpt_ms << " ms\n";
     EXPECT_LT(rejected, 0.05);
     EXPECT_GT(run.points_added, run.points_in / 2);
-    // The conflict-zone E re-grows O less completely (see the printed |O|/|F|): only the
-    // ball modes are required to have carved every keyframe centre.
-    ExpectStreetCarved(run, n, mode.enclosing == EnclosingMode::kBall);
+    // With its widening rounds the conflict-zone E carves the keyframe centres too.
+    ExpectStreetCarved(run, n, /*centres_in_o=*/true);
   }
 }
 
@@ -292,6 +291,10 @@ TEST(IncrementalSculptor, PointFiltersOfSection51) {
   const std::vector<KeyframeStats> stats = sculptor.AddKeyframe(kf);
   ASSERT_EQ(stats.size(), 1u);
   EXPECT_EQ(stats[0].points_filtered, 4u);
+  EXPECT_EQ(stats[0].points_filtered_ground, 2u);
+  EXPECT_EQ(stats[0].points_filtered_length, 1u);
+  EXPECT_EQ(stats[0].points_filtered_aperture, 1u);
+  EXPECT_EQ(stats[0].points_invalid, 0u);
   EXPECT_EQ(stats[0].points_added, 2u);
   EXPECT_EQ(sculptor.CheckInvariants(), "");
 }

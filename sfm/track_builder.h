@@ -8,7 +8,10 @@
 // are searched in a small region around its reprojection (a PixelPredictor). After a frame the
 // tracker could not track (a black frame, a jump), the next frames are matched against the
 // last keyframe's images in a wider region (re-localisation), so that tracks resume with the
-// keyframe's track ids. Not yet: matching across overlapping neighbour cameras (issue 8).
+// keyframe's track ids. Once the tracker has resected the frame, it asks for its map points
+// to be searched among the corners whose track has no point (MapPointSearcher, matching of
+// sfm/map_point_search.h): a corner found to be a map point takes the point's track, in any
+// camera, which continues tracks across overlapping neighbour cameras (issue 8).
 
 #include <Eigen/Core>
 #include <functional>
@@ -18,6 +21,7 @@
 
 #include "calib/rig.h"
 #include "sfm/harris.h"
+#include "sfm/map_point_search.h"
 #include "sfm/tracker.h"
 #include "sfm/zncc_matching.h"
 
@@ -33,6 +37,11 @@ struct TrackBuilderOptions {
   double predicted_search_radius = 15.0;
   // Radius when re-localising against the last keyframe (no motion model after a failure).
   double relocalisation_search_radius = 80.0;
+  // A continued track takes the subpixel ZNCC maximum of the previous frame's window
+  // (ZnccMatch::pixel2) rather than the detected corner's position.
+  bool follow_window = true;
+  // Re-observation of the map points once the frame is resected (MapPointSearcher).
+  MapPointSearchOptions map_search;
 
   std::string Check() const;
 };
@@ -59,10 +68,17 @@ class TrackBuilder {
   // What the tracker made of the frame just added: a keyframe becomes the reference of a later
   // re-localisation; after a frame not tracked, the next frames are matched against it.
   void SetFrameResult(bool tracked, bool keyframe);
+  // The search of map points among the corners of the frame just added, for
+  // Tracker::AddFrame: a corner matched to a map point takes the point's track (also for the
+  // frame-to-frame chaining that follows). Valid while the builder lives.
+  MapPointSearchFn MapPointSearcher();
+  std::vector<Reobservation> SearchMapPoints(const std::vector<MapPointProjection>& candidates,
+                                             const std::vector<char>& eligible);
 
   struct Timings {
-    double detect = 0.0;  // seconds (wall) since the start: preparation and Harris
-    double match = 0.0;   // ZNCC matching and the bearings
+    double detect = 0.0;      // seconds (wall) since the start: preparation and Harris
+    double match = 0.0;       // ZNCC matching and the bearings
+    double map_search = 0.0;  // map-point re-observation (reference patches and search)
   };
   Timings StageTimings() const { return timings_; }
 
@@ -79,6 +95,10 @@ class TrackBuilder {
   std::vector<CameraState> keyframe_cameras_;  // the last keyframe's, for re-localisation
   bool lost_ = false;
   int next_track_ = 0;
+  int frame_index_ = -1;  // of the frame just added
+  MapPointSearch map_search_;
+  // The frame just added: camera and corner index of each observation.
+  std::vector<std::pair<int, int>> observation_corners_;
   Timings timings_;
 };
 

@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cassert>
 #include <chrono>
+#include <cmath>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "sfm/absolute_pose_central.h"
 #include "sfm/absolute_pose_noncentral.h"
@@ -25,6 +27,13 @@ std::string TrackerOptions::Check() const {
   if (min_init_points < 5) return "min_init_points: expected at least 5";
   if (min_resection_inliers < 4) return "min_resection_inliers: expected at least 4";
   if (!(max_jump_ratio > 1.0)) return "max_jump_ratio: expected more than 1";
+  if (map_search_keyframes < 1) return "map_search_keyframes: expected at least 1";
+  if (max_handover_delay < 0) return "max_handover_delay: expected 0 or more keyframes";
+  if (!(reobservation_max_angle_error > 0.0))
+    return "reobservation_max_angle_error: expected a positive angle (radians)";
+  if (!(noncentral_init_margin >= 1.0)) return "noncentral_init_margin: expected at least 1";
+  if (!(predicted_search_radius_scale >= 1.0))
+    return "predicted_search_radius_scale: expected at least 1";
   return {};
 }
 
@@ -38,6 +47,7 @@ struct Tracker::Impl {
     Eigen::Vector3d position;
     std::vector<PointObservation> observations;
     int created_by = -1;
+    int handed_over_by = -1;  // the keyframe whose finalisation handed it to the surface
     int track = -1;
     bool alive = true;
   };
@@ -55,6 +65,8 @@ struct Tracker::Impl {
   std::vector<Keyframe> keyframes;
   std::vector<Point> points;
   std::unordered_map<int, int> track_to_point;
+  std::vector<int> pending;      // live points not handed over yet (indices into points)
+  std::vector<int> point_stamp;  // the last frame that listed a point as a search candidate
   std::vector<FinalizedKeyframe> finalized;
   // Motion model: the last two tracked frames (frame index, world_from_rig), and the distance
   // travelled over the tracked steps so far.
@@ -118,17 +130,38 @@ struct Tracker::Impl {
     point.track = track;
     point.observations = std::move(observations);
     points.push_back(std::move(point));
-    track_to_point[track] = static_cast<int>(points.size()) - 1;
-    return static_cast<int>(points.size()) - 1;
+    point_stamp.push_back(-1);
+    const int index = static_cast<int>(points.size()) - 1;
+    track_to_point[track] = index;
+    pending.push_back(index);
+    return index;
   }
 
   FrameResult Initialise(const std::vector<TrackObservation>& observations);
-  FrameResult Track(const std::vector<TrackObservation>& observations);
+  FrameResult Track(const std::vector<TrackObservation>& observations,
+                    const MapPointSearchFn& search);
+  // The map-point search of a frame posed at world_from_rig (see MapPointSearchFn).
+  std::vector<Reobservation> SearchMapPoints(const std::vector<TrackObservation>& observations,
+                                             const Rigid3d& world_from_rig, double radius_scale,
+                                             const MapPointSearchFn& search);
+  // Applies it: re-labels and appends observations; returns how many.
+  int Reobserve(std::vector<TrackObservation>* observations, const Rigid3d& world_from_rig,
+                double radius_scale, const MapPointSearchFn& search);
+  struct Resection {
+    std::vector<Eigen::Vector3d> bearings, positions;
+    std::vector<int> cameras, observation_index;
+    RansacResult ransac;
+    Rigid3d world_from_rig;
+    bool ok = false;
+  };
+  // P3P / GP3P in RANSAC on the observations of live map points.
+  Resection Resect(const std::vector<TrackObservation>& observations);
   void TriangulateNewPoints(int keyframe);
   void LocalBundleAdjustment();
   void FinalizeUpTo(int end);
-  // The "keyframe finalised" event of keyframe k: its pose and the points it created.
-  FinalizedKeyframe MakeFinalized(int k, const std::vector<int>& created_points) const;
+  // The "keyframe finalised" event of keyframe k: its pose and the points handed over with it
+  // (their rays from keyframes up to k).
+  FinalizedKeyframe MakeFinalized(int k, const std::vector<int>& handed_points) const;
 };
 
 FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& observations) {
@@ -200,7 +233,11 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
                            options.triangulation, &position) == TriangulationStatus::kOk)
         candidate.points.emplace_back(static_cast<int>(i), position);
     }
-    if (!best || candidate.points.size() > best->points.size()) best = &candidate;
+    // The generalised candidate (second) must triangulate clearly more points: when the
+    // offsets are small for the depth its scale is ill-conditioned, and a near tie picked it
+    // with a map 50 times too small on the demo drive.
+    const double margin = best ? options.noncentral_init_margin : 1.0;
+    if (!best || candidate.points.size() > margin * best->points.size()) best = &candidate;
   }
   if (!best || static_cast<int>(best->points.size()) < options.min_init_points) return result;
   const Rigid3d world_from_rig1 = best->world_from_rig1;
@@ -226,37 +263,135 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
   return result;
 }
 
-FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& observations) {
-  FrameResult result;
-  const auto resect_start = std::chrono::steady_clock::now();
-  std::vector<Eigen::Vector3d> bearings, positions;
-  std::vector<int> cameras, observation_index;
+std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
+    const std::vector<TrackObservation>& observations, const Rigid3d& world_from_rig,
+    double radius_scale, const MapPointSearchFn& search) {
+  const int num_cameras = static_cast<int>(rig.NumCameras());
+  auto key = [num_cameras](int track, int camera) {
+    return static_cast<int64_t>(track) * num_cameras + camera;
+  };
+  // The (track, camera) pairs the frame observes, and the observations that may become map
+  // points: those whose track has none.
+  std::unordered_set<int64_t> observed;
+  observed.reserve(2 * observations.size());
+  std::vector<char> eligible(observations.size(), 0);
+  for (size_t i = 0; i < observations.size(); ++i) {
+    observed.insert(key(observations[i].track, observations[i].camera));
+    const auto it = track_to_point.find(observations[i].track);
+    eligible[i] = it == track_to_point.end() || !points[it->second].alive;
+  }
+  const Rigid3d rig_from_world = world_from_rig.Inverse();
+  const int num_keyframes = static_cast<int>(keyframes.size());
+  const int stamp = num_frames - 1;
+  std::vector<MapPointProjection> candidates;
+  for (int k = std::max(0, num_keyframes - options.map_search_keyframes); k < num_keyframes; ++k)
+    for (const TrackObservation& observation : keyframes[k].observations) {
+      const auto it = track_to_point.find(observation.track);
+      if (it == track_to_point.end()) continue;
+      const Point& point = points[it->second];
+      if (!point.alive || point_stamp[it->second] == stamp) continue;
+      point_stamp[it->second] = stamp;
+      const Eigen::Vector3d in_rig = rig_from_world * point.position;
+      for (int c = 0; c < num_cameras; ++c) {
+        if (observed.count(key(point.track, c))) continue;
+        // The direction the map's model expects: from the central centre in central mode.
+        const Eigen::Vector3d bearing =
+            rig.cameras[c].cam_from_rig.rotation * (in_rig - CenterInRig(c));
+        candidates.push_back({point.track, c, bearing, radius_scale});
+      }
+    }
+  if (candidates.empty()) return {};
+  std::vector<Reobservation> found = search(candidates, eligible);
+  // The front end's promise, checked: each observation once, each (track, camera) once, only
+  // eligible observations, only candidates.
+  std::unordered_set<int64_t> candidate_keys;
+  for (const MapPointProjection& candidate : candidates)
+    candidate_keys.insert(key(candidate.track, candidate.camera));
+  std::vector<char> used(observations.size(), 0);
+  std::vector<Reobservation> result;
+  for (const Reobservation& r : found) {
+    if (r.observation >= static_cast<int>(observations.size())) continue;
+    const bool existing = r.observation >= 0;
+    if (existing ? r.camera != observations[r.observation].camera
+                 : r.camera < 0 || r.camera >= num_cameras)
+      continue;
+    const int64_t k = key(r.track, existing ? observations[r.observation].camera : r.camera);
+    if (!candidate_keys.count(k) || observed.count(k)) continue;
+    if (existing && (!eligible[r.observation] || used[r.observation])) continue;
+    if (existing) used[r.observation] = 1;
+    observed.insert(k);
+    result.push_back(r);
+  }
+  return result;
+}
+
+Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservation>& observations) {
+  const auto start = std::chrono::steady_clock::now();
+  Resection r;
   for (size_t j = 0; j < observations.size(); ++j) {
     const auto it = track_to_point.find(observations[j].track);
     if (it == track_to_point.end() || !points[it->second].alive) continue;
-    bearings.push_back(options.central ? RigBearing(observations[j]) : observations[j].bearing);
-    cameras.push_back(observations[j].camera);
-    positions.push_back(points[it->second].position);
-    observation_index.push_back(static_cast<int>(j));
+    r.bearings.push_back(options.central ? RigBearing(observations[j]) : observations[j].bearing);
+    r.cameras.push_back(observations[j].camera);
+    r.positions.push_back(points[it->second].position);
+    r.observation_index.push_back(static_cast<int>(j));
   }
-  Rigid3d world_from_rig;
-  RansacResult ransac;
   if (options.central) {
     CentralAbsolutePoseOptions absolute;
     absolute.ransac = options.resection_ransac;
     Rigid3d world_from_central;
-    ransac = EstimateCentralAbsolutePose(bearings, positions, absolute, &world_from_central);
-    world_from_rig = RigFromCentral(world_from_central);
+    r.ransac = EstimateCentralAbsolutePose(r.bearings, r.positions, absolute, &world_from_central);
+    r.world_from_rig = RigFromCentral(world_from_central);
   } else {
     NoncentralAbsolutePoseOptions absolute;
     absolute.ransac = options.resection_ransac;
-    ransac = EstimateNoncentralAbsolutePose(rig, bearings, cameras, positions, absolute,
-                                            &world_from_rig);
+    r.ransac = EstimateNoncentralAbsolutePose(rig, r.bearings, r.cameras, r.positions, absolute,
+                                              &r.world_from_rig);
   }
-  AddSeconds(resect_start, &timings.resect);
-  if (!ransac.success || ransac.num_inliers < options.min_resection_inliers) {
-    result.status = "resection failed: " + std::to_string(ransac.num_inliers) + " inliers of " +
-                    std::to_string(bearings.size());
+  r.ok = r.ransac.success && r.ransac.num_inliers >= options.min_resection_inliers;
+  AddSeconds(start, &timings.resect);
+  return r;
+}
+
+int Tracker::Impl::Reobserve(std::vector<TrackObservation>* observations,
+                             const Rigid3d& world_from_rig, double radius_scale,
+                             const MapPointSearchFn& search) {
+  const auto start = std::chrono::steady_clock::now();
+  int count = 0;
+  for (const Reobservation& r :
+       SearchMapPoints(*observations, world_from_rig, radius_scale, search)) {
+    if (r.observation >= 0) {
+      (*observations)[r.observation].track = r.track;
+      (*observations)[r.observation].bearing = r.bearing.normalized();
+    } else
+      observations->push_back({r.track, r.camera, r.bearing.normalized()});
+    ++count;
+  }
+  AddSeconds(start, &timings.map_search);
+  return count;
+}
+
+FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_observations,
+                                 const MapPointSearchFn& search) {
+  FrameResult result;
+  // The frame's observations, re-labelled (and completed) by the map-point search.
+  std::vector<TrackObservation> observations = input_observations;
+  Resection resection = Resect(observations);
+  bool searched = false;
+  if (!resection.ok && search && !last_tracked.empty()) {
+    // Too few chained tracks: search the map points around the constant-velocity prediction
+    // (a wider radius) and resect again with what is found.
+    Rigid3d predicted;
+    if (Predict(num_frames - 1, &predicted)) {
+      searched = true;
+      result.reobserved =
+          Reobserve(&observations, predicted, options.predicted_search_radius_scale, search);
+      if (result.reobserved > 0) resection = Resect(observations);
+    }
+  }
+  if (!resection.ok) {
+    result.status = "resection failed: " + std::to_string(resection.ransac.num_inliers) +
+                    " inliers of " + std::to_string(resection.bearings.size());
     return result;
   }
   // A pose far from the motion model is a wrong resection (wrong matches that agree), not a
@@ -273,13 +408,30 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& observatio
     const int frames_since = num_frames - 1 - last_tracked.back().frame;
     const double allowed =
         options.max_jump_ratio * std::max(last_step, mean_step) * std::max(1, frames_since);
-    const double jump = (world_from_rig.translation - predicted.translation).norm();
+    const double jump = (resection.world_from_rig.translation - predicted.translation).norm();
     if (mean_step > 0.0 && jump > allowed) {
       result.status = "rejected: resected pose " + std::to_string(jump / mean_step) +
                       " mean steps from the prediction";
       return result;
     }
   }
+  // Map-point re-observation around the projections by the resected pose; then, optionally,
+  // the pose again from every observation of a map point (kept when it has at least as many
+  // inliers: the re-observations that agree are then among its inliers).
+  if (search && !searched) {
+    const int found = Reobserve(&observations, resection.world_from_rig, 1.0, search);
+    result.reobserved += found;
+    if (found > 0 && options.resect_after_search) {
+      Resection again = Resect(observations);
+      if (again.ok && again.ransac.num_inliers >= resection.ransac.num_inliers)
+        resection = std::move(again);
+    }
+  }
+  const Rigid3d world_from_rig = resection.world_from_rig;
+  const std::vector<Eigen::Vector3d>& bearings = resection.bearings;
+  const std::vector<Eigen::Vector3d>& positions = resection.positions;
+  const std::vector<int>& observation_index = resection.observation_index;
+  const RansacResult& ransac = resection.ransac;
   result.tracked = true;
   result.world_from_rig = world_from_rig;
   result.inliers = ransac.num_inliers;
@@ -295,6 +447,24 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& observatio
     if (!ransac.inlier_mask[k]) continue;
     tracked_now[track_to_point[observations[observation_index[k]].track]] = 1;
     depths.push_back((positions[k] - world_from_rig.translation).norm());
+  }
+  // The re-observations that agree with the pose (the resection's inliers already include
+  // those of a search around the prediction) join their points at a keyframe, and count as
+  // tracked: they were found where the pose projects them.
+  std::vector<int> reobserved;
+  std::vector<char> in_resection(observations.size(), 0);
+  for (int j : observation_index) in_resection[j] = 1;
+  for (size_t j = 0; j < observations.size(); ++j) {
+    if (in_resection[j]) continue;
+    const auto it = track_to_point.find(observations[j].track);
+    if (it == track_to_point.end() || !points[it->second].alive) continue;
+    const WorldRay ray = Ray(world_from_rig, observations[j].camera, observations[j].bearing);
+    const Eigen::Vector3d to_point = points[it->second].position - ray.center;
+    if (std::atan2(ray.direction.cross(to_point).norm(), ray.direction.dot(to_point)) >
+        options.reobservation_max_angle_error)
+      continue;
+    reobserved.push_back(static_cast<int>(j));
+    if (options.reobserved_count_as_tracked) tracked_now[it->second] = 1;
   }
   for (const TrackObservation& observation : keyframes[last].observations) {
     const auto it = track_to_point.find(observation.track);
@@ -322,6 +492,11 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& observatio
     points[track_to_point[observation.track]].observations.push_back(
         {index, observation.camera, observation.bearing});
   }
+  for (int j : reobserved) {
+    const TrackObservation& observation = observations[j];
+    points[track_to_point[observation.track]].observations.push_back(
+        {index, observation.camera, observation.bearing});
+  }
   TriangulateNewPoints(index);
   LocalBundleAdjustment();
   result.keyframe = true;
@@ -333,17 +508,26 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
   const auto start = std::chrono::steady_clock::now();
   const int window_begin =
       std::max(0, keyframe - options.num_free_keyframes - options.num_fixed_keyframes);
+  // The observations of the tracks without a point, in the window's keyframes (a track may
+  // be seen by two cameras of one keyframe).
+  std::unordered_map<int, std::vector<PointObservation>> by_track;
+  for (const TrackObservation& observation : keyframes[keyframe].observations)
+    if (!track_to_point.count(observation.track))
+      by_track[observation.track].push_back({keyframe, observation.camera, observation.bearing});
+  for (int k = keyframe - 1; k >= window_begin; --k)
+    for (const TrackObservation& older : keyframes[k].observations) {
+      const auto it = by_track.find(older.track);
+      if (it != by_track.end()) it->second.push_back({k, older.camera, older.bearing});
+    }
   for (const TrackObservation& observation : keyframes[keyframe].observations) {
-    if (track_to_point.count(observation.track)) continue;
-    std::vector<PointObservation> track_observations = {
-        {keyframe, observation.camera, observation.bearing}};
-    for (int k = keyframe - 1; k >= window_begin; --k)
-      for (const TrackObservation& older : keyframes[k].observations)
-        if (older.track == observation.track) {
-          track_observations.push_back({k, older.camera, older.bearing});
-          break;
-        }
-    if (track_observations.size() < 2) continue;
+    const auto it = by_track.find(observation.track);
+    if (it == by_track.end() || track_to_point.count(observation.track)) continue;
+    std::vector<PointObservation> track_observations = std::move(it->second);
+    by_track.erase(it);
+    const bool two_keyframes =
+        std::any_of(track_observations.begin(), track_observations.end(),
+                    [&](const PointObservation& o) { return o.keyframe != keyframe; });
+    if (!two_keyframes) continue;
     std::vector<WorldRay> rays;
     for (const PointObservation& o : track_observations)
       rays.push_back(Ray(keyframes[o.keyframe].world_from_rig, o.camera, o.bearing));
@@ -377,8 +561,8 @@ void Tracker::Impl::LocalBundleAdjustment() {
     if (!seen_by_free) continue;
     const int problem_point = static_cast<int>(problem.points_in_world.size());
     problem.points_in_world.push_back(point.position);
-    // The points of a finalised keyframe were handed over: they never move again.
-    problem.point_fixed.push_back(keyframes[point.created_by].finalized ? 1 : 0);
+    // The points handed over to the surface never move again.
+    problem.point_fixed.push_back(point.handed_over_by >= 0 ? 1 : 0);
     point_of.push_back(static_cast<int>(p));
     for (size_t i = 0; i < point.observations.size(); ++i) {
       const PointObservation& o = point.observations[i];
@@ -416,22 +600,23 @@ void Tracker::Impl::LocalBundleAdjustment() {
   FinalizeUpTo(num_keyframes - options.num_free_keyframes);
 }
 
-FinalizedKeyframe Tracker::Impl::MakeFinalized(int k,
-                                               const std::vector<int>& created_points) const {
+FinalizedKeyframe Tracker::Impl::MakeFinalized(int k, const std::vector<int>& handed_points) const {
   const Keyframe& keyframe = keyframes[k];
   FinalizedKeyframe event;
   event.keyframe = k;
   event.frame = keyframe.frame;
   event.world_from_rig = keyframe.world_from_rig;
   event.center = keyframe.world_from_rig * central_center;
-  for (int p : created_points) {
+  for (int p : handed_points) {
     FinalizedPoint finalized_point;
     finalized_point.point = p;
     finalized_point.position = points[p].position;
     for (const PointObservation& o : points[p].observations)
-      finalized_point.rays.push_back({o.keyframe,
-                                      keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera),
-                                      o.camera, o.bearing});
+      // Rays of keyframes up to k only: the later ones can still move.
+      if (o.keyframe <= k)
+        finalized_point.rays.push_back(
+            {o.keyframe, keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera), o.camera,
+             o.bearing});
     event.points.push_back(std::move(finalized_point));
   }
   return event;
@@ -442,10 +627,25 @@ void Tracker::Impl::FinalizeUpTo(int end) {
     Keyframe& keyframe = keyframes[k];
     if (keyframe.finalized) continue;
     keyframe.finalized = true;
-    std::vector<int> created;
-    for (size_t p = 0; p < points.size(); ++p)
-      if (points[p].alive && points[p].created_by == k) created.push_back(static_cast<int>(p));
-    finalized.push_back(MakeFinalized(k, created));
+    // Hand over the points created up to k that no newer keyframe observes, and those whose
+    // delay is over; the others wait for a later keyframe.
+    std::vector<int> handed, still_pending;
+    for (int p : pending) {
+      Point& point = points[p];
+      if (!point.alive) continue;
+      const bool observed_later =
+          std::any_of(point.observations.begin(), point.observations.end(),
+                      [k](const PointObservation& o) { return o.keyframe > k; });
+      if (point.created_by <= k &&
+          (!observed_later || k >= point.created_by + options.max_handover_delay)) {
+        point.handed_over_by = k;
+        handed.push_back(p);
+      } else {
+        still_pending.push_back(p);
+      }
+    }
+    pending = std::move(still_pending);
+    finalized.push_back(MakeFinalized(k, handed));
   }
 }
 
@@ -460,7 +660,8 @@ Tracker::Tracker(const Rig& rig, const TrackerOptions& options) : impl_(new Impl
 
 Tracker::~Tracker() = default;
 
-FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations) {
+FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations,
+                              const MapPointSearchFn& search) {
   ++impl_->num_frames;
   if (impl_->keyframes.empty()) {
     Impl::Keyframe keyframe;
@@ -474,8 +675,8 @@ FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations)
     impl_->RecordTracked(0, result.world_from_rig);
     return result;
   }
-  const FrameResult result =
-      impl_->keyframes.size() == 1 ? impl_->Initialise(observations) : impl_->Track(observations);
+  const FrameResult result = impl_->keyframes.size() == 1 ? impl_->Initialise(observations)
+                                                          : impl_->Track(observations, search);
   if (result.tracked) impl_->RecordTracked(impl_->num_frames - 1, result.world_from_rig);
   return result;
 }
@@ -553,9 +754,10 @@ void Tracker::MergeTracks(const std::vector<std::pair<int, int>>& drop_keep) {
     Impl::Point& to = m.points[k->second];
     if (!from.alive || !to.alive) continue;
     for (const Impl::PointObservation& o : from.observations) {
-      const bool seen =
-          std::any_of(to.observations.begin(), to.observations.end(),
-                      [&](const Impl::PointObservation& t) { return t.keyframe == o.keyframe; });
+      const bool seen = std::any_of(to.observations.begin(), to.observations.end(),
+                                    [&](const Impl::PointObservation& t) {
+                                      return t.keyframe == o.keyframe && t.camera == o.camera;
+                                    });
       if (!seen) to.observations.push_back(o);
     }
     from.alive = false;
@@ -597,12 +799,55 @@ std::vector<FinalizedKeyframe> Tracker::FinalizedSnapshot() const {
   std::vector<FinalizedKeyframe> result;
   std::vector<std::vector<int>> created(m.keyframes.size());
   for (size_t p = 0; p < m.points.size(); ++p)
-    if (m.points[p].alive && m.points[p].created_by >= 0)
-      created[m.points[p].created_by].push_back(static_cast<int>(p));
+    if (m.points[p].alive && m.points[p].handed_over_by >= 0)
+      created[m.points[p].handed_over_by].push_back(static_cast<int>(p));
   for (size_t k = 0; k < m.keyframes.size(); ++k)
     if (m.keyframes[k].finalized)
       result.push_back(m.MakeFinalized(static_cast<int>(k), created[k]));
   return result;
+}
+
+TrackStats ComputeTrackStats(const std::vector<FinalizedKeyframe>& keyframes, double min_aperture) {
+  TrackStats stats;
+  std::vector<int> lengths;
+  size_t rays = 0;
+  int multi_camera = 0, aperture_ok = 0;
+  const double max_cos = std::cos(min_aperture);
+  for (const FinalizedKeyframe& keyframe : keyframes)
+    for (const FinalizedPoint& point : keyframe.points) {
+      std::vector<int> seen_keyframes;
+      std::vector<Eigen::Vector3d> directions;
+      bool two_cameras = false;
+      for (const FinalizedRay& ray : point.rays) {
+        seen_keyframes.push_back(ray.keyframe);
+        directions.push_back((ray.center - point.position).normalized());
+        two_cameras = two_cameras || ray.camera != point.rays.front().camera;
+      }
+      std::sort(seen_keyframes.begin(), seen_keyframes.end());
+      lengths.push_back(static_cast<int>(std::unique(seen_keyframes.begin(), seen_keyframes.end()) -
+                                         seen_keyframes.begin()));
+      rays += point.rays.size();
+      multi_camera += two_cameras ? 1 : 0;
+      bool wide = false;
+      for (size_t i = 0; i < directions.size() && !wide; ++i)
+        for (size_t j = i + 1; j < directions.size() && !wide; ++j)
+          wide = directions[i].dot(directions[j]) < max_cos;
+      aperture_ok += wide ? 1 : 0;
+    }
+  stats.points = static_cast<int>(lengths.size());
+  if (lengths.empty()) return stats;
+  const double n = static_cast<double>(lengths.size());
+  double sum = 0.0;
+  for (int length : lengths) sum += length;
+  stats.mean_keyframes = sum / n;
+  std::sort(lengths.begin(), lengths.end());
+  const size_t half = lengths.size() / 2;
+  stats.median_keyframes =
+      lengths.size() % 2 ? lengths[half] : 0.5 * (lengths[half - 1] + lengths[half]);
+  stats.mean_rays = static_cast<double>(rays) / n;
+  stats.multi_camera_share = multi_camera / n;
+  stats.aperture_ok_share = aperture_ok / n;
+  return stats;
 }
 
 }  // namespace omni

@@ -6,6 +6,15 @@
 // bundle adjustment over the newest keyframes and finalises the keyframes that leave its
 // window. Central mode: the rig is one camera at the mean camera centre; non-central mode: the
 // true cam_from_rig offsets throughout. Poses are always world_from_rig of the rig frame.
+//
+// Long tracks (issue 8): once a frame is resected, the live points of the recent keyframes are
+// projected into every camera where the frame does not observe them and searched by the front
+// end (MapPointSearchFn, sfm/map_point_search.h); a match re-labels the observation with the
+// point's track. A point may so have two observations in one frame (and one keyframe), in two
+// different cameras (neighbour overlap), never two in one camera. A point is handed to the
+// surface (FinalizedKeyframe::points) with the first keyframe finalised after it is no longer
+// observed by a newer keyframe (at most max_handover_delay keyframes after its creation), so
+// that it carries its whole track; until then it keeps moving in the bundle adjustment.
 
 #include <Eigen/Core>
 #include <memory>
@@ -16,6 +25,7 @@
 #include "calib/rig.h"
 #include "sfm/bundle_adjustment.h"
 #include "sfm/keyframe_selection.h"
+#include "sfm/map_point_search.h"
 #include "sfm/ransac.h"
 #include "sfm/triangulation.h"
 
@@ -30,12 +40,32 @@ struct TrackerOptions {
   BundleAdjustmentOptions bundle_adjustment;  // its mode follows `central`
   int num_free_keyframes = 3;                 // issue 8: newest n keyframes free (default 3)
   int num_fixed_keyframes = 7;                // and the N before them fixed (7–10)
+  // Non-central initialisation: the generalised relative pose replaces the central five-point
+  // one only when it triangulates this many times as many points.
+  double noncentral_init_margin = 1.2;
   int min_init_points = 50;        // points triangulated for the initialisation to be accepted
   int min_resection_inliers = 30;  // fewer: the frame is reported as not tracked
   // Never a silently wrong map: a resected centre farther from the constant-velocity
   // prediction than max_jump_ratio times a step (the larger of the last step and the mean step
   // so far) times the frames since the last tracked one is rejected as a wrong pose.
   double max_jump_ratio = 4.0;
+  // Map-point re-observation: the points of the newest this-many keyframes are searched.
+  int map_search_keyframes = 10;
+  // A point goes to the surface with the first keyframe finalised once no newer keyframe
+  // observes it, or at the latest with keyframe created_by + max_handover_delay (0: always
+  // with the keyframe that created it, the old behaviour).
+  int max_handover_delay = 12;
+  // When the chained tracks do not resect a frame, the map points are searched around the
+  // constant-velocity prediction with the search radius times this.
+  double predicted_search_radius_scale = 3.0;
+  // After the search, resect the frame again with the re-observations (a second RANSAC).
+  bool resect_after_search = true;
+  // Whether the points the search found count as tracked in the keyframe decision.
+  bool reobserved_count_as_tracked = true;
+  // A re-observation is kept when its bearing is within this angle of its point seen from the
+  // resected pose (radians; the search radius bounds it already; the central approximation
+  // bends near points by up to offset / depth).
+  double reobservation_max_angle_error = 0.006;
 
   std::string Check() const;
 };
@@ -51,6 +81,7 @@ struct FrameResult {
   bool keyframe = false;
   Rigid3d world_from_rig;
   int inliers = 0;
+  int reobserved = 0;  // observations the map-point search gave a map point (new or re-labelled)
   std::string status;  // why not tracked, or what happened
 };
 
@@ -72,8 +103,22 @@ struct FinalizedKeyframe {
   int frame = -1;
   Rigid3d world_from_rig;
   Eigen::Vector3d center = Eigen::Vector3d::Zero();  // c_t
-  std::vector<FinalizedPoint> points;                // the points created with this keyframe
+  std::vector<FinalizedPoint> points;  // the points handed over with this keyframe (see top)
 };
+
+// Track lengths of the points handed over (the rays the surface and the COLMAP model get).
+struct TrackStats {
+  int points = 0;
+  double mean_keyframes = 0.0;  // distinct keyframes observing a point
+  double median_keyframes = 0.0;
+  double mean_rays = 0.0;
+  double multi_camera_share = 0.0;  // points observed by two or more cameras of the rig
+  // Points with two rays (from their optical centres) more than min_aperture apart: those
+  // that pass the aperture filter of the surface (paper §5.1: 10°).
+  double aperture_ok_share = 0.0;
+};
+TrackStats ComputeTrackStats(const std::vector<FinalizedKeyframe>& keyframes,
+                             double min_aperture = 10.0 * M_PI / 180.0);
 
 class Tracker {
  public:
@@ -82,7 +127,10 @@ class Tracker {
   Tracker(const Tracker&) = delete;
   Tracker& operator=(const Tracker&) = delete;
 
-  FrameResult AddFrame(const std::vector<TrackObservation>& observations);
+  // search, when given, is asked for the map points of the recent keyframes once the frame
+  // is resected (see MapPointSearchFn); the observations it re-labels count as tracked.
+  FrameResult AddFrame(const std::vector<TrackObservation>& observations,
+                       const MapPointSearchFn& search = {});
   // Finalises every keyframe still in the window (end of the sequence).
   void Finish();
   // Keyframes finalised since the last call.
@@ -99,6 +147,7 @@ class Tracker {
     double resect = 0.0;
     double triangulate = 0.0;
     double bundle_adjustment = 0.0;
+    double map_search = 0.0;  // candidates and the front end's search (its time included)
   };
   Timings StageTimings() const;
 

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <map>
 #include <random>
 #include <set>
 
@@ -204,6 +205,189 @@ TEST(TrackerFailures, PredictsByConstantVelocity) {
   tracker.AddFrame({});  // not tracked
   EXPECT_FALSE(tracker.PredictPose(&predicted));
 }
+
+}  // namespace
+}  // namespace omni
+
+namespace omni {
+namespace {
+
+// A front end that loses its tracks as Harris corners do: each frame a point's corner is
+// missed with probability miss_rate, and a point seen again after a miss, or in another
+// camera, starts a new track id (the per-camera frame-to-frame chaining of the old front end).
+// Its map-point search is perfect in appearance (it knows the true point behind a track) but
+// geometric in position: a candidate is found only when the true point is seen in that camera
+// within max_angle of the predicted bearing, as a detected observation without a map point
+// (re-labelled) or, when its corner was missed, as a new observation.
+class FragmentingFrontEnd {
+ public:
+  FragmentingFrontEnd(const SyntheticDrive& drive, double miss_rate, uint32_t seed)
+      : drive_(drive), miss_rate_(miss_rate), random_(seed) {}
+
+  std::vector<TrackObservation> Frame(int f) {
+    frame_ = f;
+    visible_.clear();
+    observed_points_.clear();
+    std::vector<TrackObservation> observations;
+    std::uniform_real_distribution<double> uniform(0.0, 1.0);
+    for (const TrackObservation& truth : drive_.frames[f]) {
+      const int64_t key = Key(truth.track, truth.camera);
+      visible_[key] = truth.bearing;
+      if (uniform(random_) < miss_rate_) continue;  // the corner is not detected
+      auto chain = chains_.find(key);
+      if (chain == chains_.end() || chain->second.last_frame != f - 1) {
+        const int id = next_id_++;
+        point_of_track_[id] = truth.track;
+        chain = chains_.insert_or_assign(key, Chain{id, f}).first;
+      }
+      chain->second.last_frame = f;
+      observations.push_back({chain->second.track, truth.camera, truth.bearing});
+      observed_points_.push_back(truth.track);
+    }
+    return observations;
+  }
+
+  MapPointSearchFn Searcher(double max_angle) {
+    return [this, max_angle](const std::vector<MapPointProjection>& candidates,
+                             const std::vector<char>& eligible) {
+      std::vector<Reobservation> result;
+      std::set<int> used;
+      for (const MapPointProjection& candidate : candidates) {
+        const int point = point_of_track_.at(candidate.track);
+        const int64_t key = Key(point, candidate.camera);
+        const auto visible = visible_.find(key);
+        if (visible == visible_.end() ||
+            AngleBetween(visible->second, candidate.bearing) > max_angle)
+          continue;
+        // The detected observation of that point in that camera, if any.
+        int index = -1;
+        for (size_t i = 0; i < observed_points_.size(); ++i)
+          if (observed_points_[i] == point && last_observations_camera(i) == candidate.camera)
+            index = static_cast<int>(i);
+        if (index >= 0 && (!eligible[index] || used.count(index))) continue;
+        if (index >= 0) {
+          used.insert(index);
+          result.push_back({index, candidate.track, candidate.camera, (*last_)[index].bearing});
+        } else {
+          result.push_back({-1, candidate.track, candidate.camera, visible->second});
+        }
+        chains_.insert_or_assign(key, Chain{candidate.track, frame_});
+      }
+      return result;
+    };
+  }
+
+  // The camera of observation i of the current frame.
+  void SetLastObservations(const std::vector<TrackObservation>* observations) {
+    last_ = observations;
+  }
+
+ private:
+  struct Chain {
+    int track;
+    int last_frame;
+  };
+  static int64_t Key(int point, int camera) { return static_cast<int64_t>(point) * 16 + camera; }
+  int last_observations_camera(size_t i) const { return (*last_)[i].camera; }
+
+  const SyntheticDrive& drive_;
+  double miss_rate_;
+  std::mt19937 random_;
+  int frame_ = -1;
+  int next_id_ = 0;
+  std::map<int64_t, Chain> chains_;             // (point, camera) -> current track
+  std::map<int, int> point_of_track_;           // track id -> true point
+  std::map<int64_t, Eigen::Vector3d> visible_;  // this frame's true bearings
+  std::vector<int> observed_points_;            // per observation of the frame
+  const std::vector<TrackObservation>* last_ = nullptr;
+};
+
+struct ReobservationRun {
+  TrackStats stats;
+  double rms = 0.0;
+  double length = 0.0;
+  int untracked = 0;
+  int duplicates = 0;  // a point with two rays from one camera of one keyframe
+  int reobserved = 0;
+};
+
+ReobservationRun RunWithFragmentedTracks(bool central, double rig_radius, bool search,
+                                         double miss_rate) {
+  const SyntheticDrive drive = MakeDrive(rig_radius, 60, 0.0003, 0.0);
+  FragmentingFrontEnd front_end(drive, miss_rate, 7);
+  TrackerOptions options;
+  options.central = central;
+  Tracker tracker(drive.rig, options);
+  ReobservationRun run;
+  run.length = drive.length;
+  std::vector<FinalizedKeyframe> finalized;
+  for (size_t f = 0; f < drive.frames.size(); ++f) {
+    const std::vector<TrackObservation> observations = front_end.Frame(static_cast<int>(f));
+    front_end.SetLastObservations(&observations);
+    const FrameResult result =
+        tracker.AddFrame(observations, search ? front_end.Searcher(0.01) : MapPointSearchFn());
+    if (tracker.NumKeyframes() >= 2 && !result.tracked) ++run.untracked;
+    run.reobserved += result.reobserved;
+    for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())
+      finalized.push_back(std::move(keyframe));
+  }
+  tracker.Finish();
+  for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())
+    finalized.push_back(std::move(keyframe));
+  run.stats = ComputeTrackStats(finalized);
+  for (const FinalizedKeyframe& keyframe : finalized)
+    for (const FinalizedPoint& point : keyframe.points) {
+      std::set<std::pair<int, int>> seen;
+      for (const FinalizedRay& ray : point.rays)
+        run.duplicates += seen.insert({ray.keyframe, ray.camera}).second ? 0 : 1;
+    }
+  const std::vector<Rigid3d> poses = tracker.KeyframePoses();
+  const std::vector<int> frames = tracker.KeyframeFrames();
+  std::vector<Eigen::Vector3d> estimated, truth;
+  for (size_t k = 0; k < poses.size(); ++k) {
+    estimated.push_back(poses[k].translation);
+    truth.push_back(drive.world_from_rig[frames[k]].translation);
+  }
+  run.rms = AlignmentRms(EstimateSim3Umeyama(estimated, truth, true), estimated, truth);
+  return run;
+}
+
+class TrackerReobservationTest : public ::testing::TestWithParam<Case> {};
+
+// With the corners of a quarter of the points missed each frame and tracks cut at every
+// camera change, the map-point search makes the tracks long again: more keyframes per point,
+// points seen by two cameras, no point twice in one camera of one keyframe, and the
+// trajectory still within 1 % of the distance.
+TEST_P(TrackerReobservationTest, MapPointSearchLengthensFragmentedTracks) {
+  const ReobservationRun without =
+      RunWithFragmentedTracks(GetParam().central, GetParam().rig_radius, false, 0.1);
+  const ReobservationRun with =
+      RunWithFragmentedTracks(GetParam().central, GetParam().rig_radius, true, 0.1);
+  RecordProperty("mean_track_keyframes_without_x100",
+                 static_cast<int>(100 * without.stats.mean_keyframes));
+  RecordProperty("mean_track_keyframes_with_x100",
+                 static_cast<int>(100 * with.stats.mean_keyframes));
+  RecordProperty("aperture_ok_without_pct",
+                 static_cast<int>(100 * without.stats.aperture_ok_share));
+  RecordProperty("aperture_ok_with_pct", static_cast<int>(100 * with.stats.aperture_ok_share));
+  EXPECT_EQ(without.untracked, 0);
+  EXPECT_EQ(with.untracked, 0);
+  EXPECT_EQ(without.reobserved, 0);
+  EXPECT_GT(with.reobserved, 0);
+  EXPECT_EQ(with.duplicates, 0);
+  EXPECT_EQ(without.stats.multi_camera_share, 0.0);
+  // The neighbour cameras' cones overlap from the rig outwards only when the rig is small.
+  if (GetParam().rig_radius < 0.1) {
+    EXPECT_GT(with.stats.multi_camera_share, 0.01);
+  }
+  EXPECT_LT(without.stats.mean_keyframes, 2.8);
+  EXPECT_GT(with.stats.mean_keyframes, 3.0);
+  EXPECT_GT(with.stats.aperture_ok_share, without.stats.aperture_ok_share + 0.2);
+  EXPECT_LT(with.rms, 0.01 * with.length);
+}
+
+INSTANTIATE_TEST_SUITE_P(Modes, TrackerReobservationTest,
+                         ::testing::Values(Case{true, 0.05}, Case{false, 0.3}));
 
 }  // namespace
 }  // namespace omni

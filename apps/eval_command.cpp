@@ -189,6 +189,14 @@ void RegisterEval(CLI::App& app) {
       std::printf("F-score at %.2f m: %.3f (precision %.3f, recall %.3f)\n", pr.threshold,
                   pr.f_score, pr.precision, pr.recall);
     }
+    if (summary.pipeline.present) {
+      const EvalPipeline& pipeline = summary.pipeline;
+      std::printf(
+          "pipeline: %.2f frames/s, surface ms per keyframe median %.1f p95 %.1f, %zu loop "
+          "closure(s), surface replays %.1f s\n",
+          pipeline.frames_per_second, pipeline.surface_ms_median, pipeline.surface_ms_p95,
+          pipeline.loop_closures.size(), pipeline.surface_replay_seconds);
+    }
     std::printf("report: %s\n", (out / "report.md").string().c_str());
   });
 }

@@ -24,6 +24,8 @@
 
 #include "apps/commands.h"
 #include "apps/pipeline/pipeline.h"
+#include "apps/pipeline/point_colors.h"
+#include "apps/pipeline/sfm_stats.h"
 #include "calib/atomic_file.h"
 #include "calib/drive.h"
 #include "calib/error.h"
@@ -154,6 +156,13 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
     poses.push_back({keyframe.frame / o.frame_rate, keyframe.world_from_rig});
     for (const FinalizedPoint& point : keyframe.points) cloud.points.push_back(point.position);
   }
+  // Point colours from the keyframe images, now that the SfM thread is done.
+  PointColorStats color_stats;
+  cloud.colors = ColorPoints(
+      rig, result.keyframes,
+      [&drive](int frame, int camera) { return drive.LoadRgb(frame, camera); }, {}, &color_stats);
+  spdlog::info("reconstruct: point colours from {} keyframe images in {:.2f} s",
+               color_stats.images_read, color_stats.seconds);
   WriteTum(poses, partial / "poses.tum");
   WritePlyPoints(cloud, partial / "points.ply");
   WritePlyMesh(result.mesh, partial / "surface.ply");
@@ -163,7 +172,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
       [&drive](int frame, int camera) {
         return fs::relative(drive.ImagePath(frame, camera), drive.folder()).generic_string();
       },
-      partial / "sparse");
+      partial / "sparse", cloud.colors);
   std::ostringstream frames_csv, keyframes_csv;
   frames_csv << PipelineFramesCsvHeader() << '\n';
   for (const PipelineFrameRow& row : result.frames) frames_csv << PipelineFramesCsvRow(row) << '\n';
@@ -172,14 +181,28 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
     keyframes_csv << PipelineKeyframesCsvRow(row) << '\n';
   WriteTextFileAtomically(partial / "stats" / "sfm_frames.csv", frames_csv.str());
   WriteTextFileAtomically(partial / "stats" / "keyframes.csv", keyframes_csv.str());
+  // stats/sfm_stages.csv and sfm_summary.csv, by the sfm command's writer.
+  SfmStats sfm;
+  for (const PipelineFrameRow& row : result.frames)
+    sfm.AddFrame(row.loaded, row.matched, row.result);
+  sfm.keyframes = result.keyframes.size();
+  sfm.points = cloud.points.size();
+  sfm.colmap = colmap;
+  sfm.tracks = ComputeTrackStats(result.keyframes);
+  sfm.front = result.sfm_front;
+  sfm.back = result.sfm_back;
+  sfm.load_seconds = result.load_seconds;
+  sfm.loop_closure_seconds = result.loop_closure_seconds;
+  sfm.queue_wait_seconds = result.queue_blocked_seconds;
+  sfm.total_seconds = result.sfm_seconds;
+  WriteSfmStats(sfm, partial / "stats");
 
   std::vector<double> surface_ms, queue_ms;
   for (const PipelineKeyframeRow& row : result.surface_rows) {
     if (!row.surface.batch) surface_ms.push_back(row.surface.ms_total);
     queue_ms.push_back(row.queue_ms);
   }
-  size_t untracked = 0;
-  for (const PipelineFrameRow& row : result.frames) untracked += row.loaded && !row.result.tracked;
+  const size_t untracked = sfm.frames_not_tracked;
   const ManifoldReport manifold = CheckManifold(result.mesh);
   nlohmann::json summary = {
       {"drive", drive.folder().string()},
@@ -207,24 +230,33 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
        queue_ms.empty() ? 0.0 : *std::max_element(queue_ms.begin(), queue_ms.end())},
   };
   nlohmann::json loops = nlohmann::json::array();
-  for (const LoopClosureEvent& e : result.loop_closures)
-    loops.push_back({{"keyframe", e.keyframe},
-                     {"frame", e.frame},
-                     {"candidate_keyframe", e.candidate_keyframe},
-                     {"candidate_frame", e.candidate_frame},
-                     {"ring_shift", e.shift},
-                     {"appearance_score", e.score},
-                     {"matches", e.matches},
-                     {"inliers", e.inliers},
-                     {"correction_translation", e.correction_translation},
-                     {"correction_scale", e.correction_scale},
-                     {"ms", e.ms}});
+  for (size_t i = 0; i < result.loop_closures.size(); ++i) {
+    const LoopClosureEvent& e = result.loop_closures[i];
+    loops.push_back(
+        {{"keyframe", e.keyframe},
+         {"frame", e.frame},
+         {"candidate_keyframe", e.candidate_keyframe},
+         {"candidate_frame", e.candidate_frame},
+         {"ring_shift", e.shift},
+         {"appearance_score", e.score},
+         {"matches", e.matches},
+         {"inliers", e.inliers},
+         {"correction_translation", e.correction_translation},
+         {"correction_rotation_deg", i < result.loop_correction_rotation_deg.size()
+                                         ? result.loop_correction_rotation_deg[i]
+                                         : 0.0},
+         {"correction_scale", e.correction_scale},
+         {"ms", e.ms},
+         {"surface_replay_seconds",
+          i < result.loop_replay_seconds.size() ? result.loop_replay_seconds[i] : 0.0}});
+  }
   summary["colmap_images"] = colmap.images;
   summary["colmap_points"] = colmap.points;
   summary["colmap_mean_reprojection_error_px"] = colmap.mean_reprojection_error;
   summary["loop_closure"] = o.pipeline.loop_closure;
   summary["loop_closures"] = loops;
   summary["surface_replay_seconds"] = result.replay_seconds;
+  summary["point_colors_seconds"] = color_stats.seconds;
   WriteTextFileAtomically(partial / kSummaryFile, summary.dump(2) + "\n");
   Publish(partial, out);
 

@@ -19,6 +19,8 @@
 #include <string>
 
 #include "apps/commands.h"
+#include "apps/pipeline/point_colors.h"
+#include "apps/pipeline/sfm_stats.h"
 #include "calib/atomic_file.h"
 #include "calib/drive.h"
 #include "calib/error.h"
@@ -94,8 +96,7 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
   csv << "frame,name,corners,matched,predicted,relocalising,tracked,keyframe,inliers,status\n";
   const auto start = std::chrono::steady_clock::now();
   auto last_progress = start;
-  double load_seconds = 0.0;
-  int untracked = 0;
+  SfmStats stats;
   std::vector<FinalizedKeyframe> keyframes;
   // The next frame's images are decoded while the current one is processed.
   auto load = [&drive, &rig](size_t frame) {
@@ -108,7 +109,7 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
     auto load_start = std::chrono::steady_clock::now();
     std::vector<cv::Mat> images = next.get();  // rethrows a loading error
     if (f + 1 < num_frames) next = std::async(std::launch::async, load, f + 1);
-    load_seconds += SecondsSince(load_start);
+    stats.load_seconds += SecondsSince(load_start);
 
     // Search regions by reprojection of the map points once the pose is predicted.
     Rigid3d predicted;
@@ -124,11 +125,11 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
       };
     }
     const TrackedFrame frame = builder.AddFrame(images, predict);
-    const FrameResult result = tracker.AddFrame(frame.observations);
+    const FrameResult result = tracker.AddFrame(frame.observations, builder.MapPointSearcher());
     builder.SetFrameResult(result.tracked, result.keyframe);
     for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())
       keyframes.push_back(std::move(keyframe));
-    untracked += result.tracked ? 0 : 1;
+    stats.AddFrame(true, frame.num_matched, result);
     csv << f << ',' << drive.FrameName(f) << ',' << frame.num_corners << ',' << frame.num_matched
         << ',' << frame.num_predicted << ',' << frame.relocalising << ',' << result.tracked << ','
         << result.keyframe << ',' << result.inliers << ',' << result.status << '\n';
@@ -148,7 +149,7 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
   tracker.Finish();
   for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())
     keyframes.push_back(std::move(keyframe));
-  const double total_seconds = SecondsSince(start);
+  stats.total_seconds = SecondsSince(start);
   if (tracker.NumKeyframes() < 2)
     throw InputError(o.drive, "images", "the SfM could not initialise (fewer than 2 keyframes)");
 
@@ -160,6 +161,11 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
     poses.push_back({keyframe.frame / o.frame_rate, keyframe.world_from_rig});
     for (const FinalizedPoint& point : keyframe.points) cloud.points.push_back(point.position);
   }
+  // Point colours from the keyframe images (after the SfM, which reads grey images only).
+  PointColorStats color_stats;
+  cloud.colors = ColorPoints(
+      rig, keyframes, [&drive](int frame, int camera) { return drive.LoadRgb(frame, camera); }, {},
+      &color_stats);
   WriteTum(poses, out / "poses.tum");
   WritePlyPoints(cloud, out / "points.ply");
   const ColmapModelStats colmap = WriteColmapTextModel(
@@ -168,43 +174,31 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
         return std::filesystem::relative(drive.ImagePath(frame, camera), drive.folder())
             .generic_string();
       },
-      out / "sparse");
+      out / "sparse", cloud.colors);
   WriteTextFileAtomically(out / "stats" / "sfm_frames.csv", csv.str());
 
-  // Time per stage (wall seconds; detection and matching run in parallel over the cameras).
+  // Time per stage and the summary (apps/pipeline/sfm_stats.h, shared with reconstruct).
   const TrackBuilder::Timings front = builder.StageTimings();
   const Tracker::Timings back = tracker.StageTimings();
-  const std::vector<std::pair<std::string, double>> stages = {
-      {"load_wait", load_seconds},
-      {"detect", front.detect},
-      {"match", front.match},
-      {"resect", back.resect},
-      {"triangulate", back.triangulate},
-      {"bundle_adjustment", back.bundle_adjustment},
-      {"total", total_seconds}};
-  std::ostringstream stage_csv;
-  stage_csv << "stage,seconds,ms_per_frame\n";
-  for (const auto& [stage, seconds] : stages)
-    stage_csv << stage << ',' << seconds << ',' << 1000.0 * seconds / num_frames << '\n';
-  WriteTextFileAtomically(out / "stats" / "sfm_stages.csv", stage_csv.str());
-  std::ostringstream summary;
-  summary << "frames," << num_frames << "\nframes_not_tracked," << untracked << "\nkeyframes,"
-          << poses.size() << "\npoints," << cloud.points.size() << "\nobservations,"
-          << colmap.observations << "\nmean_reprojection_error_px,"
-          << colmap.mean_reprojection_error << "\nframes_per_second,"
-          << num_frames / std::max(total_seconds, 1e-9) << '\n';
-  WriteTextFileAtomically(out / "stats" / "sfm_summary.csv", "name,value\n" + summary.str());
+  stats.front = front;
+  stats.back = back;
+  stats.keyframes = poses.size();
+  stats.points = cloud.points.size();
+  stats.colmap = colmap;
+  stats.tracks = ComputeTrackStats(keyframes);
+  WriteSfmStats(stats, out / "stats");
 
   spdlog::info(
       "sfm: {} keyframes, {} points, {} of {} frames not tracked, {:.1f} frames/s, "
       "written to {}",
-      poses.size(), cloud.points.size(), untracked, num_frames,
-      num_frames / std::max(total_seconds, 1e-9), out.string());
+      poses.size(), cloud.points.size(), stats.frames_not_tracked, num_frames,
+      num_frames / std::max(stats.total_seconds, 1e-9), out.string());
   spdlog::info(
       "sfm: seconds per stage: detect {:.1f}, match {:.1f}, resect {:.1f}, triangulate "
-      "{:.1f}, bundle adjustment {:.1f}, waiting for images {:.1f}, total {:.1f}",
+      "{:.1f}, bundle adjustment {:.1f}, waiting for images {:.1f}, total {:.1f}; point colours "
+      "{:.1f} s after",
       front.detect, front.match, back.resect, back.triangulate, back.bundle_adjustment,
-      load_seconds, total_seconds);
+      stats.load_seconds, stats.total_seconds, color_stats.seconds);
 }
 
 }  // namespace

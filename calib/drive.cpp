@@ -6,6 +6,7 @@
 #include <cctype>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <system_error>
 
 #include "calib/error.h"
@@ -227,6 +228,44 @@ cv::Mat Drive::LoadGray(size_t frame, size_t camera) const {
                          std::to_string(rig_camera.height));
   }
   return image;
+}
+
+cv::Mat Drive::LoadRgb(size_t frame, size_t camera) const {
+  const std::filesystem::path file = ImagePath(frame, camera);
+  cv::Mat image;
+  try {
+    // The file's own channels (IMREAD_COLOR would expand a grey PNG in the decoder, 2.5 times
+    // slower), EXIF orientation applied as LoadGray's IMREAD_GRAYSCALE does.
+    image = cv::imread(file.string(), cv::IMREAD_ANYCOLOR | cv::IMREAD_ANYDEPTH);
+  } catch (const cv::Exception&) {
+    image.release();
+  }
+  if (image.empty()) throw InputError(file, "", "cannot read image (missing or corrupt)");
+  if (image.depth() != CV_8U) {
+    const double scale = image.depth() == CV_16U ? 1.0 / 256.0 : 1.0;
+    cv::Mat converted;
+    image.convertTo(converted, CV_8U, scale);
+    image = converted;
+  }
+  if (image.channels() == 2) {  // grey and alpha
+    cv::Mat grey;
+    cv::extractChannel(image, grey, 0);
+    image = grey;
+  }
+  const Camera& rig_camera = rig_.cameras.at(camera);
+  if (image.cols != rig_camera.width || image.rows != rig_camera.height) {
+    throw InputError(file, "",
+                     "image is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
+                         ", rig.json gives camera " + rig_camera.name + " " +
+                         std::to_string(rig_camera.width) + "x" +
+                         std::to_string(rig_camera.height));
+  }
+  cv::Mat rgb;
+  cv::cvtColor(image, rgb,
+               image.channels() == 1   ? cv::COLOR_GRAY2RGB
+               : image.channels() == 4 ? cv::COLOR_BGRA2RGB
+                                       : cv::COLOR_BGR2RGB);
+  return rgb;
 }
 
 }  // namespace omni

@@ -48,6 +48,9 @@ class Drive {
   // The image as 8-bit grey. Throws InputError naming the file if it is missing, corrupt, or not
   // the size rig.json gives for that camera.
   cv::Mat LoadGray(size_t frame, size_t camera) const;
+  // The image in colour, 8-bit RGB (CV_8UC3, red first as PLY colours want; a grey image gives
+  // three equal channels). Throws InputError as LoadGray.
+  cv::Mat LoadRgb(size_t frame, size_t camera) const;
 
   std::filesystem::path GroundTruthPosesPath() const { return folder_ / "gt" / "poses.tum"; }
   std::filesystem::path GroundTruthMeshPath() const { return folder_ / "gt" / "mesh.ply"; }

@@ -1,5 +1,6 @@
 #include "sfm/colmap_model.h"
 
+#include <cassert>
 #include <iomanip>
 #include <sstream>
 #include <unordered_map>
@@ -33,10 +34,14 @@ std::string ColmapCameraModel(const Camera& camera, std::vector<double>* params)
 ColmapModelStats WriteColmapTextModel(
     const Rig& rig, const std::vector<FinalizedKeyframe>& keyframes,
     const std::function<std::string(int frame, int camera)>& image_name,
-    const std::filesystem::path& folder) {
+    const std::filesystem::path& folder, const std::vector<Eigen::Matrix<uint8_t, 3, 1>>& colors) {
   std::filesystem::create_directories(folder);
   const int num_cameras = static_cast<int>(rig.NumCameras());
   ColmapModelStats stats;
+  size_t num_points = 0;
+  for (const FinalizedKeyframe& keyframe : keyframes) num_points += keyframe.points.size();
+  assert(colors.empty() || colors.size() == num_points);
+  (void)num_points;
 
   std::ostringstream cameras;
   cameras << std::setprecision(17);
@@ -66,8 +71,10 @@ ColmapModelStats WriteColmapTextModel(
   std::ostringstream tracks;
   double error_sum = 0.0;
   long point_id = 0;
+  size_t point_index = 0;  // into colors
   for (const FinalizedKeyframe& keyframe : keyframes) {
     for (const FinalizedPoint& point : keyframe.points) {
+      const size_t index = point_index++;
       tracks.str("");
       double point_error = 0.0;
       int observations = 0;
@@ -94,8 +101,13 @@ ColmapModelStats WriteColmapTextModel(
         continue;
       }
       points << id << ' ' << point.position.x() << ' ' << point.position.y() << ' '
-             << point.position.z() << " 128 128 128 " << point_error / observations << tracks.str()
-             << '\n';
+             << point.position.z();
+      if (index < colors.size())
+        points << ' ' << int{colors[index][0]} << ' ' << int{colors[index][1]} << ' '
+               << int{colors[index][2]} << ' ';
+      else
+        points << " 128 128 128 ";
+      points << point_error / observations << tracks.str() << '\n';
       error_sum += point_error;
       stats.observations += observations;
       ++stats.points;

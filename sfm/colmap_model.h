@@ -7,6 +7,8 @@
 // at +0.5 (the image covers [0, width)), calib at integers: principal points and 2-D points
 // are shifted by 0.5.
 
+#include <Eigen/Core>
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -26,10 +28,13 @@ struct ColmapModelStats {
 
 // Writes the three files into `folder` (created), each atomically. `image_name(frame, camera)`
 // names the image of a keyframe's frame. Points with no observation that projects are left out.
+// `colors`: empty (every point grey 128) or one RGB colour per point of `keyframes` in their
+// order, keyframe by keyframe (e.g. apps/pipeline/point_colors.h).
 ColmapModelStats WriteColmapTextModel(
     const Rig& rig, const std::vector<FinalizedKeyframe>& keyframes,
     const std::function<std::string(int frame, int camera)>& image_name,
-    const std::filesystem::path& folder);
+    const std::filesystem::path& folder,
+    const std::vector<Eigen::Matrix<uint8_t, 3, 1>>& colors = {});
 
 // COLMAP's name of a calib camera model and its parameters (COLMAP pixel convention).
 std::string ColmapCameraModel(const Camera& camera, std::vector<double>* params);

@@ -9,6 +9,7 @@
 #include <iomanip>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <unordered_set>
 
 #include "calib/atomic_file.h"
 #include "calib/error.h"
@@ -215,7 +216,101 @@ std::vector<std::string> MakePlots(const EvalSummary& summary, const fs::path& r
   return made;
 }
 
+// q-quantile as reconstruct.json's: the element at floor(q n) of the sorted values.
+double Quantile(std::vector<double> v, double q) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())))];
+}
+
+// The live per-keyframe surface times of stats/keyframes.csv (see EvalPipeline); false when
+// the file or its keyframe / ms_total columns are missing.
+bool LiveSurfaceTimes(const fs::path& csv, std::vector<double>* ms) {
+  if (!fs::exists(csv)) return false;
+  const std::vector<std::string> names = CsvHeader(csv);
+  auto column = [&names](const char* name) {
+    const auto it = std::find(names.begin(), names.end(), name);
+    return it == names.end() ? -1 : static_cast<int>(it - names.begin());
+  };
+  const int keyframe_column = column("keyframe"), ms_column = column("ms_total"),
+            batch_column = column("batch");
+  if (keyframe_column < 0 || ms_column < 0) return false;
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);  // header
+  std::unordered_set<std::string> seen;
+  while (std::getline(in, line)) {
+    std::vector<std::string> fields;
+    std::stringstream stream(line);
+    std::string field;
+    while (std::getline(stream, field, ',')) fields.push_back(field);
+    if (static_cast<int>(fields.size()) <= std::max({keyframe_column, ms_column, batch_column}))
+      continue;
+    if (!seen.insert(fields[keyframe_column]).second) continue;  // a replay's row
+    if (batch_column >= 0 && fields[batch_column] != "0") continue;
+    try {
+      ms->push_back(std::stod(fields[ms_column]));
+    } catch (const std::exception&) {
+      throw InputError(csv, "ms_total", "not a number: \"" + fields[ms_column] + "\"");
+    }
+  }
+  return true;
+}
+
+// A number field of a JSON object; NaN when missing or not a number (NaN is written as null).
+double NumberOr(const nlohmann::json& object, const char* key) {
+  const auto it = object.find(key);
+  return it != object.end() && it->is_number() ? it->get<double>()
+                                               : std::numeric_limits<double>::quiet_NaN();
+}
+
 }  // namespace
+
+EvalPipeline ReadEvalPipeline(const fs::path& rec) {
+  EvalPipeline pipeline;
+  const fs::path path = rec / "reconstruct.json";
+  if (!fs::exists(path)) return pipeline;
+  try {
+    std::ifstream in(path);
+    const nlohmann::json json = nlohmann::json::parse(in);
+    if (!json.is_object()) throw InputError(path, "", "expected a JSON object");
+    pipeline.present = true;
+    pipeline.frames = json.value("frames", 0L);
+    pipeline.keyframes = json.value("keyframes", 0L);
+    pipeline.seconds = NumberOr(json, "seconds");
+    pipeline.frames_per_second = NumberOr(json, "frames_per_second");
+    pipeline.loop_closure_enabled = json.value("loop_closure", false);
+    pipeline.surface_replay_seconds = NumberOr(json, "surface_replay_seconds");
+    for (const nlohmann::json& loop : json.value("loop_closures", nlohmann::json::array())) {
+      EvalLoopClosure e;
+      e.keyframe = loop.value("keyframe", -1);
+      e.frame = loop.value("frame", -1);
+      e.candidate_keyframe = loop.value("candidate_keyframe", -1);
+      e.candidate_frame = loop.value("candidate_frame", -1);
+      e.inliers = loop.value("inliers", 0);
+      e.translation = NumberOr(loop, "correction_translation");
+      e.rotation_deg = NumberOr(loop, "correction_rotation_deg");
+      e.scale = NumberOr(loop, "correction_scale");
+      e.ms = NumberOr(loop, "ms");
+      e.replay_seconds = NumberOr(loop, "surface_replay_seconds");
+      pipeline.loop_closures.push_back(e);
+    }
+    std::vector<double> ms;
+    if (LiveSurfaceTimes(rec / "stats" / "keyframes.csv", &ms)) {
+      pipeline.surface_keyframes = static_cast<long>(ms.size());
+      pipeline.surface_ms_median = Quantile(ms, 0.5);
+      pipeline.surface_ms_p95 = Quantile(ms, 0.95);
+      pipeline.surface_ms_source = "stats/keyframes.csv";
+    } else if (json.contains("surface_ms_median")) {
+      pipeline.surface_ms_median = NumberOr(json, "surface_ms_median");
+      pipeline.surface_ms_p95 = NumberOr(json, "surface_ms_p95");
+      pipeline.surface_ms_source = "reconstruct.json";
+    }
+  } catch (const nlohmann::json::exception& error) {
+    throw InputError(path, "", std::string("malformed: ") + error.what());
+  }
+  return pipeline;
+}
 
 std::string EvalOptions::Check() const {
   for (const std::string& problem :
@@ -286,6 +381,8 @@ EvalSummary RunEvaluation(const fs::path& drive, const fs::path& rec, const fs::
   } else {
     summary.warnings.push_back("no points.ply: point distances skipped");
   }
+
+  summary.pipeline = ReadEvalPipeline(rec);
 
   fs::create_directories(report_dir);
   if (options.plots) {
@@ -383,6 +480,37 @@ std::string EvalSummaryToJson(const EvalSummary& s) {
                       {"distance_quantiles_m", q},
                       {"distances_m", StatsJson(s.points.distances)}};
   }
+  if (s.pipeline.present) {
+    // NaN (not given) as null.
+    auto number = [](double x) { return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json(); };
+    const EvalPipeline& pl = s.pipeline;
+    nlohmann::json loops = nlohmann::json::array();
+    for (const EvalLoopClosure& e : pl.loop_closures) {
+      loops.push_back(
+          {{"frame", e.frame},
+           {"keyframe", e.keyframe},
+           {"candidate_frame", e.candidate_frame},
+           {"candidate_keyframe", e.candidate_keyframe},
+           {"inliers", e.inliers},
+           {"correction_translation", number(e.translation)},
+           {"correction_translation_m", number(e.translation * s.poses.gt_from_estimated.scale)},
+           {"correction_rotation_deg", number(e.rotation_deg)},
+           {"correction_scale", number(e.scale)},
+           {"ms", number(e.ms)},
+           {"surface_replay_seconds", number(e.replay_seconds)}});
+    }
+    json["pipeline"] = {{"frames", pl.frames},
+                        {"keyframes", pl.keyframes},
+                        {"seconds", number(pl.seconds)},
+                        {"frames_per_second", number(pl.frames_per_second)},
+                        {"surface_keyframes", pl.surface_keyframes},
+                        {"surface_ms_median", number(pl.surface_ms_median)},
+                        {"surface_ms_p95", number(pl.surface_ms_p95)},
+                        {"surface_ms_source", pl.surface_ms_source},
+                        {"loop_closure", pl.loop_closure_enabled},
+                        {"loop_closures", loops},
+                        {"surface_replay_seconds", number(pl.surface_replay_seconds)}};
+  }
   json["estimated_mesh"] = nlohmann::json::parse(s.estimated_mesh.ToJson());
   json["gt_mesh"] = nlohmann::json::parse(s.gt_mesh.ToJson());
   json["paper"] = {{"registration_rms_m", kPaperPoseRms},
@@ -463,6 +591,42 @@ std::string EvalSummaryToMarkdown(const EvalSummary& s) {
       md << (i ? " / " : "") << Cm(s.points.quantiles[i]);
     }
     md << " |\n";
+  }
+  if (s.pipeline.present) {
+    const EvalPipeline& pl = s.pipeline;
+    md << "\n## Pipeline (reconstruct.json)\n\n"
+       << "| | |\n|---|---|\n"
+       << "| frames / keyframes | " << pl.frames << " / " << pl.keyframes << " |\n"
+       << "| whole pipeline, seconds / frames per second (target 15) | " << Fixed(pl.seconds, 1)
+       << " / " << Fixed(pl.frames_per_second, 2) << " |\n";
+    if (!pl.surface_ms_source.empty())
+      md << "| surface ms per keyframe, median / p95 (" << pl.surface_ms_source
+         << (pl.surface_keyframes > 0 ? ", " + std::to_string(pl.surface_keyframes) + " keyframes"
+                                      : std::string())
+         << ") | " << Fixed(pl.surface_ms_median, 1) << " / " << Fixed(pl.surface_ms_p95, 1)
+         << " |\n";
+    md << "| loop closure | " << (pl.loop_closure_enabled ? "on" : "off") << ", "
+       << pl.loop_closures.size() << " closed |\n"
+       << "| surface replay after the closures (s) | " << Fixed(pl.surface_replay_seconds, 2)
+       << " |\n\n";
+    if (!pl.loop_closures.empty()) {
+      md << "### Loop closures\n\n"
+         << "The correction is the move of the revisiting keyframe (pose graph and global "
+            "adjustment); its translation in map units and in metres (× the scale of S).\n\n"
+         << "| # | revisit frame (keyframe) | place frame (keyframe) | inliers | translation "
+            "(map) | translation (m) | rotation (°) | scale | time (ms) | surface replay (s) "
+            "|\n|---|---|---|---|---|---|---|---|---|---|\n";
+      for (size_t i = 0; i < pl.loop_closures.size(); ++i) {
+        const EvalLoopClosure& e = pl.loop_closures[i];
+        md << "| " << i + 1 << " | " << e.frame << " (" << e.keyframe << ") | " << e.candidate_frame
+           << " (" << e.candidate_keyframe << ") | " << e.inliers << " | "
+           << Fixed(e.translation, 3) << " | "
+           << Fixed(e.translation * s.poses.gt_from_estimated.scale, 3) << " | "
+           << Fixed(e.rotation_deg, 3) << " | " << Fixed(e.scale, 4) << " | " << Fixed(e.ms, 0)
+           << " | " << Fixed(e.replay_seconds, 2) << " |\n";
+      }
+      md << "\n";
+    }
   }
   md << "\n## Meshes\n\n| | estimated | ground truth |\n|---|---|---|\n";
   auto row = [&md](const char* name, long a, long b) {

@@ -4,7 +4,9 @@
 // renders (DESIGN.md §7, issue 5).
 
 #include <filesystem>
+#include <limits>
 #include <string>
+#include <vector>
 
 #include "apps/eval/mesh_check.h"
 #include "apps/eval/pose_eval.h"
@@ -27,12 +29,48 @@ struct EvalOptions {
   std::string Check() const;
 };
 
+// A loop closure of `omnisculpt reconstruct` (OUT/reconstruct.json, "loop_closures").
+struct EvalLoopClosure {
+  int keyframe = -1, frame = -1;                      // the revisit
+  int candidate_keyframe = -1, candidate_frame = -1;  // the place seen before
+  int inliers = 0;
+  double translation = 0.0;  // how far the revisiting keyframe moved, map units
+  double rotation_deg = std::numeric_limits<double>::quiet_NaN();  // NaN: not in the file
+  double scale = 1.0;
+  double ms = 0.0;  // detection, correction and global adjustment
+  double replay_seconds = std::numeric_limits<double>::quiet_NaN();  // surface replay after it
+};
+
+// Whole-pipeline figures of `omnisculpt reconstruct` (issue 9), from OUT/reconstruct.json and
+// OUT/stats/keyframes.csv when they exist. NaN: not given.
+struct EvalPipeline {
+  bool present = false;  // OUT/reconstruct.json was read
+  long frames = 0, keyframes = 0;
+  double seconds = std::numeric_limits<double>::quiet_NaN();
+  double frames_per_second = std::numeric_limits<double>::quiet_NaN();
+  bool loop_closure_enabled = false;
+  std::vector<EvalLoopClosure> loop_closures;
+  double surface_replay_seconds = std::numeric_limits<double>::quiet_NaN();
+  // Surface time per keyframe (ms_total) as sculpted while the drive was read: the non-batch
+  // rows of stats/keyframes.csv whose keyframe appears there for the first time (a replay after
+  // a loop closure repeats earlier keyframes); reconstruct.json's figures otherwise.
+  long surface_keyframes = 0;
+  double surface_ms_median = std::numeric_limits<double>::quiet_NaN();
+  double surface_ms_p95 = std::numeric_limits<double>::quiet_NaN();
+  std::string surface_ms_source;  // "stats/keyframes.csv", "reconstruct.json" or empty
+};
+
+// Reads REC/reconstruct.json (absent: present = false) and REC/stats/keyframes.csv. Throws
+// InputError naming the file when reconstruct.json is malformed.
+EvalPipeline ReadEvalPipeline(const std::filesystem::path& rec);
+
 struct EvalSummary {
   PoseEvalResult poses;
   RayErrorResult ray_errors;
   SurfaceCompareResult surfaces;
   PointDistanceResult points;
   bool has_points = false;
+  EvalPipeline pipeline;
   MeshCheckReport estimated_mesh;
   MeshCheckReport gt_mesh;
   std::vector<std::string> warnings;

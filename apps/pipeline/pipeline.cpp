@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cassert>
 #include <chrono>
+#include <cmath>
 #include <exception>
 #include <memory>
 #include <sstream>
@@ -110,19 +111,33 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
           spdlog::warn("{}", result.skipped.back());
           row.result.status = "skipped: unreadable image";
         }
+        result.load_seconds += SecondsSince(frame_start);
         if (row.loaded) {
           const TrackedFrame frame = builder.AddFrame(images);
           row.corners = frame.num_corners;
           row.matched = frame.num_matched;
-          row.result = tracker.AddFrame(frame.observations);
+          row.result = tracker.AddFrame(frame.observations, builder.MapPointSearcher());
           if (!row.result.tracked)
             spdlog::warn("frame {}: not tracked ({})", row.name, row.result.status);
           hand_over();
           LoopClosureEvent event;
-          if (closer && row.result.keyframe &&
-              closer->AddKeyframe(images, frame, &tracker, &event)) {
+          const auto loop_start = Clock::now();
+          std::vector<Rigid3d> poses_before;
+          if (closer && row.result.keyframe) poses_before = tracker.KeyframePoses();
+          const bool closed =
+              closer && row.result.keyframe && closer->AddKeyframe(images, frame, &tracker, &event);
+          if (closer && row.result.keyframe)
+            result.loop_closure_seconds += SecondsSince(loop_start);
+          if (closed) {
             spdlog::info("reconstruct: {}", event.Summary());
             result.loop_closures.push_back(event);
+            double rotation_deg = 0.0;
+            const std::vector<Rigid3d> poses_after = tracker.KeyframePoses();
+            const size_t k = static_cast<size_t>(event.keyframe);
+            if (k < poses_before.size() && k < poses_after.size())
+              rotation_deg =
+                  poses_after[k].rotation.angularDistance(poses_before[k].rotation) * 180.0 / M_PI;
+            result.loop_correction_rotation_deg.push_back(rotation_deg);
             result.keyframes = tracker.FinalizedSnapshot();
             queue.Push({ToSurfaceKeyframes(result.keyframes), true, Clock::now()});
           }
@@ -142,6 +157,8 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
           throw InputError(drive.folder().string(), "images",
                            "the SfM could not initialise (fewer than 2 keyframes)");
       }
+      result.sfm_front = builder.StageTimings();
+      result.sfm_back = tracker.StageTimings();
     } catch (...) {
       sfm_error = std::current_exception();
     }
@@ -183,7 +200,11 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
           record(sculptor->AddKeyframe(keyframe));
         }
         result.surface_seconds += SecondsSince(busy);
-        if (item->replay) result.replay_seconds += SecondsSince(busy);
+        if (item->replay) {
+          const double replay_seconds = SecondsSince(busy);
+          result.replay_seconds += replay_seconds;
+          result.loop_replay_seconds.push_back(replay_seconds);
+        }
       }
       if (!sfm_error) {
         const auto busy = Clock::now();

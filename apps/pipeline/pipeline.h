@@ -79,7 +79,17 @@ struct PipelineResult {
   size_t queue_max_size = 0, queue_blocked_pushes = 0;
   double queue_blocked_seconds = 0.0;
   std::vector<LoopClosureEvent> loop_closures;
+  // Per loop closure: the rotation the correction applied to the revisiting keyframe (degrees),
+  // and the surface time of the replay that followed it.
+  std::vector<double> loop_correction_rotation_deg;
+  std::vector<double> loop_replay_seconds;
   double replay_seconds = 0.0;  // surface time spent replaying after corrections
+  // SfM time per stage (wall seconds; the SfM thread's): reading the images, detection and
+  // matching, resection, triangulation, local adjustment, and loop detection and correction.
+  double load_seconds = 0.0;
+  TrackBuilder::Timings sfm_front;
+  Tracker::Timings sfm_back;
+  double loop_closure_seconds = 0.0;
 };
 
 // Runs the pipeline to the end of the drive. Throws InputError when the SfM cannot initialise

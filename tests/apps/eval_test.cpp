@@ -226,6 +226,84 @@ TEST_F(EvalTest, EmptySurfaceIsInputError) {
   }
 }
 
+// `omnisculpt reconstruct`'s summary: a hand-made reconstruct.json with one loop closure and a
+// stats/keyframes.csv with a replay after it.
+TEST_F(EvalTest, ReconstructJsonGivesThePipelineSectionWithTheLoopClosures) {
+  WriteReconstruction(kEstimatedFromGt, gt_mesh_);
+  EvalOptions options = SmallOptions();
+  options.plots = options.renders = false;
+  // Without reconstruct.json (an `omnisculpt sfm` output): no pipeline section.
+  EvalSummary summary = RunEvaluation(drive_, rec_, root_ / "report", options);
+  EXPECT_FALSE(summary.pipeline.present);
+  EXPECT_EQ(EvalSummaryToMarkdown(summary).find("## Pipeline"), std::string::npos);
+  EXPECT_FALSE(nlohmann::json::parse(EvalSummaryToJson(summary)).contains("pipeline"));
+
+  std::ofstream(rec_ / "reconstruct.json") << R"({
+    "frames": 120, "keyframes": 30, "seconds": 12.0, "frames_per_second": 10.0,
+    "surface_ms_median": 99.0, "surface_ms_p95": 999.0, "loop_closure": true,
+    "surface_replay_seconds": 1.5,
+    "loop_closures": [{"keyframe": 25, "frame": 100, "candidate_keyframe": 1,
+      "candidate_frame": 2, "ring_shift": 0, "appearance_score": 0.8, "matches": 60,
+      "inliers": 40, "correction_translation": 0.4, "correction_rotation_deg": 0.25,
+      "correction_scale": 1.02, "ms": 350.0, "surface_replay_seconds": 1.5}]})";
+  // Keyframes 3 (the batch of the first ones), 4..8 sculpted live, the replay of 3..8 after
+  // the closure, then 9 live: the live times are 10, 20, 30, 40, 50 and 60 ms.
+  std::ofstream(rec_ / "stats" / "keyframes.csv")
+      << "keyframe,batch,cells_e,ms_enclose,ms_total,queue_ms,replay\n"
+         "3,1,100,1,500,0,0\n4,0,100,1,10,0,0\n5,0,100,1,20,0,0\n6,0,100,1,30,0,0\n"
+         "7,0,100,1,40,0,0\n8,0,100,1,50,0,0\n3,1,100,1,900,0,1\n4,0,100,1,999,0,1\n"
+         "5,0,100,1,999,0,1\n6,0,100,1,999,0,1\n7,0,100,1,999,0,1\n8,0,100,1,999,0,1\n"
+         "9,0,100,1,60,0,1\n";
+  summary = RunEvaluation(drive_, rec_, root_ / "report", options);
+  const EvalPipeline& pipeline = summary.pipeline;
+  ASSERT_TRUE(pipeline.present);
+  EXPECT_EQ(pipeline.frames, 120);
+  EXPECT_DOUBLE_EQ(pipeline.frames_per_second, 10.0);
+  EXPECT_EQ(pipeline.surface_keyframes, 6);
+  EXPECT_DOUBLE_EQ(pipeline.surface_ms_median, 40.0);  // the element at floor(0.5 * 6)
+  EXPECT_DOUBLE_EQ(pipeline.surface_ms_p95, 60.0);
+  EXPECT_EQ(pipeline.surface_ms_source, "stats/keyframes.csv");
+  ASSERT_EQ(pipeline.loop_closures.size(), 1u);
+  const EvalLoopClosure& loop = pipeline.loop_closures[0];
+  EXPECT_EQ(loop.frame, 100);
+  EXPECT_EQ(loop.candidate_keyframe, 1);
+  EXPECT_DOUBLE_EQ(loop.rotation_deg, 0.25);
+  EXPECT_DOUBLE_EQ(loop.replay_seconds, 1.5);
+
+  std::ifstream json_file(root_ / "report" / "eval.json");
+  const nlohmann::json json = nlohmann::json::parse(json_file);
+  ASSERT_TRUE(json.contains("pipeline"));
+  EXPECT_DOUBLE_EQ(json["pipeline"]["surface_ms_median"].get<double>(), 40.0);
+  const nlohmann::json& json_loop = json["pipeline"]["loop_closures"][0];
+  EXPECT_DOUBLE_EQ(json_loop["correction_rotation_deg"].get<double>(), 0.25);
+  // In metres: the map's 0.4 times the scale of S (the estimate is the truth scaled by 0.2).
+  EXPECT_NEAR(json_loop["correction_translation_m"].get<double>(), 2.0, 1e-3);
+  std::ifstream md_file(root_ / "report" / "report.md");
+  std::stringstream md;
+  md << md_file.rdbuf();
+  EXPECT_NE(md.str().find("## Pipeline"), std::string::npos);
+  EXPECT_NE(md.str().find("| whole pipeline, seconds / frames per second (target 15) | 12.0 / "
+                          "10.00 |"),
+            std::string::npos)
+      << md.str();
+  EXPECT_NE(md.str().find("| 1 | 100 (25) | 2 (1) | 40 | 0.400 | 2.000 | 0.250 | 1.0200 | 350 | "
+                          "1.50 |"),
+            std::string::npos)
+      << md.str();
+
+  // Without the CSV, reconstruct.json's own figures; a malformed file is an InputError.
+  fs::remove(rec_ / "stats" / "keyframes.csv");
+  EXPECT_DOUBLE_EQ(ReadEvalPipeline(rec_).surface_ms_median, 99.0);
+  EXPECT_EQ(ReadEvalPipeline(rec_).surface_ms_source, "reconstruct.json");
+  std::ofstream(rec_ / "reconstruct.json") << R"({"frames": 120, "loop_closures": [3]})";
+  try {
+    ReadEvalPipeline(rec_);
+    FAIL() << "expected InputError";
+  } catch (const InputError& error) {
+    EXPECT_EQ(error.file(), rec_ / "reconstruct.json");
+  }
+}
+
 // The command line.
 int RunOmnisculpt(const std::string& arguments, std::string* output = nullptr) {
   const std::string command = std::string(OMNI_EXECUTABLE) + " " + arguments + " 2>&1";

@@ -12,7 +12,9 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <thread>
 
 #include "apps/eval/mesh_check.h"
@@ -22,6 +24,7 @@
 #include "calib/ply.h"
 #include "calib/tum.h"
 #include "surface/sculptor.h"
+#include "tests/apps/point_colors_check.h"
 #include "tests/apps/run_omnisculpt.h"
 
 namespace omni {
@@ -190,6 +193,61 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
   EXPECT_EQ(points_in, ReadPlyPoints(out / "points.ply").points.size());
   EXPECT_EQ(SplitText(ReadTextFile(out / "stats" / "sfm_frames.csv")).size(),
             1 + summary["frames"].get<size_t>());
+
+  // The sfm command's statistics files, whose totals agree with reconstruct.json and the
+  // other files.
+  std::map<std::string, double> sfm_summary, sfm_stages;
+  for (const auto& [file, values] :
+       {std::pair{"sfm_summary.csv", &sfm_summary}, std::pair{"sfm_stages.csv", &sfm_stages}}) {
+    const std::vector<std::string> lines = SplitText(ReadTextFile(out / "stats" / file));
+    ASSERT_GE(lines.size(), 2u) << file;
+    for (size_t i = 1; i < lines.size(); ++i) {
+      const std::vector<std::string> columns = SplitText(lines[i], ',');
+      ASSERT_GE(columns.size(), 2u) << lines[i];
+      (*values)[columns[0]] = std::stod(columns[1]);
+    }
+  }
+  EXPECT_EQ(sfm_summary["frames"], summary["frames"].get<double>());
+  EXPECT_EQ(sfm_summary["frames_skipped"], summary["frames_skipped"].get<double>());
+  EXPECT_EQ(sfm_summary["frames_not_tracked"], summary["frames_not_tracked"].get<double>());
+  EXPECT_EQ(sfm_summary["keyframes"], static_cast<double>(poses.size()));
+  EXPECT_EQ(sfm_summary["points"], summary["points"].get<double>());
+  EXPECT_EQ(sfm_summary["points"], static_cast<double>(points_in));
+  EXPECT_NEAR(sfm_summary["mean_reprojection_error_px"],
+              summary["colmap_mean_reprojection_error_px"].get<double>(), 1e-4);
+  EXPECT_GT(sfm_summary["mean_inliers_per_tracked_frame"], 30.0);
+  EXPECT_GE(sfm_summary["mean_matched_per_frame"], sfm_summary["mean_inliers_per_tracked_frame"]);
+  // Observations: the 2-D points with a 3-D point in images.txt.
+  size_t observations = 0;
+  {
+    const std::vector<std::string> lines = SplitText(ReadTextFile(out / "sparse" / "images.txt"));
+    size_t i = 0;
+    while (i < lines.size() && lines[i].rfind('#', 0) == 0) ++i;
+    for (i += 1; i < lines.size(); i += 2) {
+      std::istringstream in(lines[i]);
+      double x, y;
+      long point;
+      while (in >> x >> y >> point) observations += point >= 0;
+    }
+  }
+  EXPECT_EQ(sfm_summary["observations"], static_cast<double>(observations));
+  const double sfm_seconds = summary["sfm_seconds"].get<double>();
+  EXPECT_NEAR(sfm_stages["total"], sfm_seconds, 1e-4 * sfm_seconds);
+  double stages_sum = 0.0;
+  for (const char* stage : {"load_wait", "detect", "match", "resect", "triangulate",
+                            "bundle_adjustment", "loop_closure", "queue_wait", "other"}) {
+    ASSERT_EQ(sfm_stages.count(stage), 1u) << stage;
+    EXPECT_GE(sfm_stages[stage], 0.0) << stage;
+    stages_sum += sfm_stages[stage];
+  }
+  EXPECT_GT(sfm_stages["detect"], 0.0);
+  EXPECT_GT(sfm_stages["bundle_adjustment"], 0.0);
+  // The stages are parts of the SfM thread's time, "other" the rest.
+  EXPECT_NEAR(stages_sum, sfm_stages["total"], 1e-3 * sfm_stages["total"]);
+  EXPECT_NEAR(sfm_stages["queue_wait"], summary["queue_blocked_seconds"].get<double>(), 1e-3);
+
+  // Points coloured from the (grey) images: the mean pixel over each point's observations.
+  testing::ExpectPointColoursAreImageMeans(drive, out, 300);
 
   // A second run refuses the non-empty folder, and --force does not touch a folder of other
   // files.

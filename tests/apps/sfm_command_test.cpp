@@ -20,6 +20,7 @@
 #include "calib/ply.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
+#include "tests/apps/point_colors_check.h"
 #include "tests/apps/run_omnisculpt.h"
 #include "tests/apps/short_drive.h"
 #include "tests/calib/io_temp_dir.h"
@@ -172,6 +173,8 @@ TEST_F(SfmCommandShortDrive, CentralTracksEveryFrameWithinOnePercent) {
   CheckEndToEnd("--central", 0, &out);
   if (HasFatalFailure()) return;
   CheckColmapModel(drive_, out);
+  // Points coloured from the (grey) images: the mean pixel over each point's observations.
+  testing::ExpectPointColoursAreImageMeans(drive_, out, 300);
 }
 
 TEST_F(SfmCommandShortDrive, NonCentralTracksEveryFrameWithinOnePercent) {

@@ -126,5 +126,47 @@ TEST(ColmapModel, WritesPosesObservationsAndTracks) {
   std::filesystem::remove_all(folder);
 }
 
+// Colours: one per point of the keyframes in their order, written as R G B; none: grey 128.
+TEST(ColmapModel, WritesThePointColoursInTheKeyframesOrder) {
+  const Rig rig = MakeSyntheticRingRig(1, false, 0.1);
+  FinalizedKeyframe keyframe;
+  keyframe.keyframe = 0;
+  for (double y : {-0.5, 0.5}) {
+    FinalizedPoint point;
+    point.position = Eigen::Vector3d(3.0, y, 0.1);
+    point.rays.push_back({0, Eigen::Vector3d::Zero(), 0,
+                          (rig.cameras[0].cam_from_rig * point.position).normalized()});
+    keyframe.points.push_back(point);
+  }
+  const std::filesystem::path folder =
+      std::filesystem::temp_directory_path() /
+      ("omni_colmap_model_colours_test_" + std::to_string(::getpid()));
+  auto colours_written = [&](const std::vector<Eigen::Matrix<uint8_t, 3, 1>>& colours) {
+    WriteColmapTextModel(
+        rig, {keyframe}, [](int, int) { return std::string("a.png"); }, folder, colours);
+    std::ifstream points(folder / "points3D.txt");
+    std::string line;
+    std::vector<Eigen::Vector3i> rgb;
+    while (std::getline(points, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      std::istringstream in(line);
+      long id;
+      double x, y, z;
+      Eigen::Vector3i c;
+      EXPECT_TRUE(in >> id >> x >> y >> z >> c[0] >> c[1] >> c[2]) << line;
+      rgb.push_back(c);
+    }
+    return rgb;
+  };
+  const std::vector<Eigen::Vector3i> coloured = colours_written({{10, 200, 30}, {255, 0, 7}});
+  ASSERT_EQ(coloured.size(), 2u);
+  EXPECT_EQ(coloured[0], Eigen::Vector3i(10, 200, 30));
+  EXPECT_EQ(coloured[1], Eigen::Vector3i(255, 0, 7));
+  const std::vector<Eigen::Vector3i> grey = colours_written({});
+  ASSERT_EQ(grey.size(), 2u);
+  EXPECT_EQ(grey[1], Eigen::Vector3i(128, 128, 128));
+  std::filesystem::remove_all(folder);
+}
+
 }  // namespace
 }  // namespace omni

@@ -144,6 +144,26 @@ class PointHash {
   std::unordered_map<uint64_t, std::vector<Eigen::Vector3d>> cells_;
 };
 
+// The point of keyframe t on the surface at p, with its rays, appended to kf when at least
+// min_rays keyframes see it (then true); its position gets the point noise.
+bool AppendObservedPoint(const RayCaster& caster, const std::vector<Eigen::Vector3d>& centres,
+                         size_t t, const Eigen::Vector3d& p, double max_distance,
+                         const GtKeyframeOptions& options, std::mt19937_64& rng,
+                         std::normal_distribution<double>& gauss, uint32_t* next_point,
+                         SurfaceKeyframe* kf) {
+  SurfacePoint point;
+  point.id = PointId(*next_point);
+  AddRays(caster, centres, t, p, max_distance, options, &point);
+  if (static_cast<int>(point.rays.size()) < options.min_rays) return false;
+  point.position = p;
+  if (options.point_noise > 0) {
+    point.position += options.point_noise * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
+  }
+  ++*next_point;
+  kf->points.push_back(std::move(point));
+  return true;
+}
+
 }  // namespace
 
 std::string GtKeyframeOptions::Check() const {
@@ -198,16 +218,8 @@ std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
       const double d = caster.Cast(kf.centre, dir, max_distance);
       if (!std::isfinite(d)) continue;
       const Eigen::Vector3d p = kf.centre + d * dir;
-      SurfacePoint point;
-      point.id = PointId(next_point);
-      AddRays(caster, centres, t, p, max_distance, options, &point);
-      if (static_cast<int>(point.rays.size()) < options.min_rays) continue;
-      point.position = p;
-      if (options.point_noise > 0) {
-        point.position += options.point_noise * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
-      }
-      ++next_point;
-      kf.points.push_back(std::move(point));
+      AppendObservedPoint(caster, centres, t, p, max_distance, options, rng, gauss, &next_point,
+                          &kf);
     }
     stream.push_back(std::move(kf));
   }
@@ -261,17 +273,9 @@ std::vector<SurfaceKeyframe> MakeGtKeyframesAtCorners(const TriangleMesh& mesh, 
       if (!std::isfinite(d)) continue;
       const Eigen::Vector3d p = world_from_cam.translation + d * direction;
       if (made.HasPointWithin(p)) continue;  // a corner seen again: the same track
-      SurfacePoint point;
-      point.id = PointId(next_point);
-      AddRays(caster, centres, t, p, max_distance, options, &point);
-      if (static_cast<int>(point.rays.size()) < options.min_rays) continue;
-      made.Add(p);
-      point.position = p;
-      if (options.point_noise > 0) {
-        point.position += options.point_noise * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
-      }
-      ++next_point;
-      kf.points.push_back(std::move(point));
+      if (AppendObservedPoint(caster, centres, t, p, max_distance, options, rng, gauss, &next_point,
+                              &kf))
+        made.Add(p);
     }
     stream.push_back(std::move(kf));
   }

@@ -64,6 +64,33 @@ std::map<std::string, std::string> ListImages(const std::filesystem::path& camer
   return files;
 }
 
+// cv::imread of `file` with `flags`, at 8 bits per channel, checked against the camera's size
+// in rig.json; InputError naming the file otherwise.
+cv::Mat ReadImage8Bit(const std::filesystem::path& file, int flags, const Camera& rig_camera) {
+  cv::Mat image;
+  try {
+    image = cv::imread(file.string(), flags);
+  } catch (const cv::Exception&) {
+    image.release();  // a codec that throws on a corrupt file is treated as one that fails
+  }
+  if (image.empty()) throw InputError(file, "", "cannot read image (missing or corrupt)");
+  if (image.depth() != CV_8U) {
+    // IMREAD_GRAYSCALE already gives 8 bits; this only guards against a codec that does not.
+    const double scale = image.depth() == CV_16U ? 1.0 / 256.0 : 1.0;
+    cv::Mat converted;
+    image.convertTo(converted, CV_8U, scale);
+    image = converted;
+  }
+  if (image.cols != rig_camera.width || image.rows != rig_camera.height) {
+    throw InputError(file, "",
+                     "image is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
+                         ", rig.json gives camera " + rig_camera.name + " " +
+                         std::to_string(rig_camera.width) + "x" +
+                         std::to_string(rig_camera.height));
+  }
+  return image;
+}
+
 }  // namespace
 
 std::string DriveOptions::Check() const {
@@ -204,61 +231,18 @@ std::filesystem::path Drive::ImagePath(size_t frame, size_t camera) const {
 }
 
 cv::Mat Drive::LoadGray(size_t frame, size_t camera) const {
-  const std::filesystem::path file = ImagePath(frame, camera);
-  cv::Mat image;
-  try {
-    image = cv::imread(file.string(), cv::IMREAD_GRAYSCALE);
-  } catch (const cv::Exception&) {
-    image.release();  // a codec that throws on a corrupt file is treated as one that fails
-  }
-  if (image.empty()) throw InputError(file, "", "cannot read image (missing or corrupt)");
-  if (image.depth() != CV_8U) {
-    // IMREAD_GRAYSCALE already gives 8 bits; this only guards against a codec that does not.
-    const double scale = image.depth() == CV_16U ? 1.0 / 256.0 : 1.0;
-    cv::Mat converted;
-    image.convertTo(converted, CV_8U, scale);
-    image = converted;
-  }
-  const Camera& rig_camera = rig_.cameras.at(camera);
-  if (image.cols != rig_camera.width || image.rows != rig_camera.height) {
-    throw InputError(file, "",
-                     "image is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
-                         ", rig.json gives camera " + rig_camera.name + " " +
-                         std::to_string(rig_camera.width) + "x" +
-                         std::to_string(rig_camera.height));
-  }
-  return image;
+  return ReadImage8Bit(ImagePath(frame, camera), cv::IMREAD_GRAYSCALE, rig_.cameras.at(camera));
 }
 
 cv::Mat Drive::LoadRgb(size_t frame, size_t camera) const {
-  const std::filesystem::path file = ImagePath(frame, camera);
-  cv::Mat image;
-  try {
-    // The file's own channels (IMREAD_COLOR would expand a grey PNG in the decoder, 2.5 times
-    // slower), EXIF orientation applied as LoadGray's IMREAD_GRAYSCALE does.
-    image = cv::imread(file.string(), cv::IMREAD_ANYCOLOR | cv::IMREAD_ANYDEPTH);
-  } catch (const cv::Exception&) {
-    image.release();
-  }
-  if (image.empty()) throw InputError(file, "", "cannot read image (missing or corrupt)");
-  if (image.depth() != CV_8U) {
-    const double scale = image.depth() == CV_16U ? 1.0 / 256.0 : 1.0;
-    cv::Mat converted;
-    image.convertTo(converted, CV_8U, scale);
-    image = converted;
-  }
+  // The file's own channels (IMREAD_COLOR would expand a grey PNG in the decoder, 2.5 times
+  // slower), EXIF orientation applied as LoadGray's IMREAD_GRAYSCALE does.
+  cv::Mat image = ReadImage8Bit(ImagePath(frame, camera), cv::IMREAD_ANYCOLOR | cv::IMREAD_ANYDEPTH,
+                                rig_.cameras.at(camera));
   if (image.channels() == 2) {  // grey and alpha
     cv::Mat grey;
     cv::extractChannel(image, grey, 0);
     image = grey;
-  }
-  const Camera& rig_camera = rig_.cameras.at(camera);
-  if (image.cols != rig_camera.width || image.rows != rig_camera.height) {
-    throw InputError(file, "",
-                     "image is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
-                         ", rig.json gives camera " + rig_camera.name + " " +
-                         std::to_string(rig_camera.width) + "x" +
-                         std::to_string(rig_camera.height));
   }
   cv::Mat rgb;
   cv::cvtColor(image, rgb,

@@ -112,19 +112,7 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
     stats.load_seconds += SecondsSince(load_start);
 
     // Search regions by reprojection of the map points once the pose is predicted.
-    Rigid3d predicted;
-    PixelPredictor predict;
-    if (tracker.PredictPose(&predicted)) {
-      const Rigid3d rig_from_world = predicted.Inverse();
-      predict = [&tracker, &rig, rig_from_world](int camera, int track, Eigen::Vector2d* pixel) {
-        Eigen::Vector3d position;
-        if (!tracker.TrackPosition(track, &position)) return false;
-        const Camera& model = rig.cameras[camera];
-        return model.Project(model.cam_from_rig * (rig_from_world * position), pixel) &&
-               model.IsInImage(*pixel);
-      };
-    }
-    const TrackedFrame frame = builder.AddFrame(images, predict);
+    const TrackedFrame frame = builder.AddFrame(images, ReprojectionPredictor(tracker, rig));
     const FrameResult result = tracker.AddFrame(frame.observations, builder.MapPointSearcher());
     builder.SetFrameResult(result.tracked, result.keyframe);
     for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())

@@ -21,6 +21,19 @@ std::string TrackBuilderOptions::Check() const {
   return {};
 }
 
+PixelPredictor ReprojectionPredictor(const Tracker& tracker, const Rig& rig) {
+  Rigid3d predicted;
+  if (!tracker.PredictPose(&predicted)) return {};
+  const Rigid3d rig_from_world = predicted.Inverse();
+  return [&tracker, &rig, rig_from_world](int camera, int track, Eigen::Vector2d* pixel) {
+    Eigen::Vector3d position;
+    if (!tracker.TrackPosition(track, &position)) return false;
+    const Camera& model = rig.cameras[camera];
+    return model.Project(model.cam_from_rig * (rig_from_world * position), pixel) &&
+           model.IsInImage(*pixel);
+  };
+}
+
 TrackBuilder::TrackBuilder(const Rig& rig, const TrackBuilderOptions& options)
     : rig_(rig),
       options_(options),

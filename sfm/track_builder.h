@@ -59,6 +59,10 @@ struct TrackedFrame {
 // point projected by the predicted pose); false when there is no prediction.
 using PixelPredictor = std::function<bool(int camera, int track, Eigen::Vector2d* pixel)>;
 
+// The PixelPredictor of the tracker's constant-velocity pose: a track's map point projected
+// into the camera; empty (no prediction) before the initialisation or after a lost frame.
+PixelPredictor ReprojectionPredictor(const Tracker& tracker, const Rig& rig);
+
 class TrackBuilder {
  public:
   TrackBuilder(const Rig& rig, const TrackBuilderOptions& options);

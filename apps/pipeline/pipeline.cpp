@@ -113,7 +113,7 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
         }
         result.load_seconds += SecondsSince(frame_start);
         if (row.loaded) {
-          const TrackedFrame frame = builder.AddFrame(images);
+          const TrackedFrame frame = builder.AddFrame(images, ReprojectionPredictor(tracker, rig));
           row.corners = frame.num_corners;
           row.matched = frame.num_matched;
           row.result = tracker.AddFrame(frame.observations, builder.MapPointSearcher());

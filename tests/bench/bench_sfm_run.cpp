@@ -105,20 +105,8 @@ void BM_SfmRun(benchmark::State& state) {
     Tracker tracker(rig, tracker_options);
     untracked = 0;
     for (const std::vector<cv::Mat>& images : drive.frames) {
-      Rigid3d predicted;
-      PixelPredictor predict;
-      if (tracker.PredictPose(&predicted)) {
-        const Rigid3d rig_from_world = predicted.Inverse();
-        predict = [&tracker, &rig, rig_from_world](int camera, int track, Eigen::Vector2d* pixel) {
-          Eigen::Vector3d position;
-          if (!tracker.TrackPosition(track, &position)) return false;
-          const Camera& model = rig.cameras[camera];
-          return model.Project(model.cam_from_rig * (rig_from_world * position), pixel) &&
-                 model.IsInImage(*pixel);
-        };
-      }
-      const TrackedFrame frame = builder.AddFrame(images, predict);
-      const FrameResult result = tracker.AddFrame(frame.observations);
+      const TrackedFrame frame = builder.AddFrame(images, ReprojectionPredictor(tracker, rig));
+      const FrameResult result = tracker.AddFrame(frame.observations, builder.MapPointSearcher());
       builder.SetFrameResult(result.tracked, result.keyframe);
       benchmark::DoNotOptimize(tracker.TakeFinalized());
       untracked += result.tracked ? 0 : 1;

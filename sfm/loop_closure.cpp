@@ -1,10 +1,13 @@
 #include "sfm/loop_closure.h"
 
+#include <spdlog/spdlog.h>
+
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cassert>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
 #include <random>
@@ -114,6 +117,7 @@ std::string LoopClosureOptions::Check() const {
   if (ransac_iterations < 1) return "ransac_iterations: expected at least 1";
   if (!(inlier_depth_share > 0.0)) return "inlier_depth_share: expected a positive share";
   if (min_inliers < 3) return "min_inliers: expected at least 3";
+  if (!(max_drift_share > 0)) return "max_drift_share: expected more than 0";
   if (cooldown_keyframes < 0) return "cooldown_keyframes: expected 0 or more";
   if (!(loop_edge_weight > 0.0)) return "loop_edge_weight: expected a positive weight";
   return {};
@@ -132,6 +136,16 @@ std::string LoopClosureEvent::Summary() const {
 LoopCloser::LoopCloser(const Rig& rig, const LoopClosureOptions& options)
     : rig_(rig), options_(options), detector_(rig, options.detection) {
   assert(options.Check().empty());
+}
+
+double LoopDriftShare(const std::vector<Rigid3d>& world_from_rig, int then, int now,
+                      const Sim3d& then_from_now) {
+  double path = 0.0;
+  for (int i = then; i < now; ++i)
+    path += (world_from_rig[i + 1].translation - world_from_rig[i].translation).norm();
+  const Eigen::Vector3d& centre = world_from_rig[now].translation;
+  const double move = (then_from_now * centre - centre).norm();
+  return path > 0.0 ? move / path : std::numeric_limits<double>::infinity();
 }
 
 bool LoopCloser::AddKeyframe(const std::vector<cv::Mat>& images, const TrackedFrame& frame,
@@ -232,6 +246,14 @@ bool LoopCloser::AddKeyframe(const std::vector<cv::Mat>& images, const TrackedFr
   Sim3d then_from_now = EstimateSim3Umeyama(in_src, in_dst);
   result.inliers = static_cast<int>(inliers_of(then_from_now).size());
   if (result.inliers < options_.min_inliers) return false;
+  const double drift_share = LoopDriftShare(poses, candidate.keyframe, k, then_from_now);
+  if (!(drift_share <= options_.max_drift_share)) {
+    spdlog::info(
+        "loop closure: keyframe {} with keyframe {} rejected: the correction would move "
+        "it by {:.1f} % of the path between them",
+        k, candidate.keyframe, 100.0 * drift_share);
+    return false;
+  }
 
   // Pose graph over every keyframe: odometry edges (neighbours one and two apart) as the map
   // is now, and the loop edge where the revisit should be.

@@ -70,6 +70,10 @@ struct LoopClosureOptions {
   // candidate's points.
   double inlier_depth_share = 0.03;
   int min_inliers = 20;
+  // A verified similarity must move the revisiting keyframe by at most this share of the path
+  // driven (keyframe centre to centre) since the place seen before: drift beyond it is not
+  // drift but a wrong place that looks alike (a repetitive street).
+  double max_drift_share = 0.1;
   int cooldown_keyframes = 20;  // keyframes after a closure before the next one is tried
   double loop_edge_weight = 10.0;
   PoseGraphOptions pose_graph;
@@ -91,6 +95,11 @@ struct LoopClosureEvent {
   double ms = 0.0;
   std::string Summary() const;
 };
+
+// How far then_from_now moves keyframe `now` (world_from_rig poses of the map), as a share of
+// the path from keyframe `then` to `now` through the keyframe centres; infinity for no path.
+double LoopDriftShare(const std::vector<Rigid3d>& world_from_rig, int then, int now,
+                      const Sim3d& then_from_now);
 
 class LoopCloser {
  public:

@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include "calib/drive.h"
 #include "calib/tum.h"
 
@@ -16,6 +18,25 @@ std::vector<cv::Mat> LoadFrame(const Drive& drive, size_t frame) {
   std::vector<cv::Mat> images;
   for (size_t c = 0; c < drive.rig().NumCameras(); ++c) images.push_back(drive.LoadGray(frame, c));
   return images;
+}
+
+// The plausibility of a verified loop: the move of the revisit against the path driven.
+TEST(LoopDriftShare, IsTheMoveOfTheRevisitOverThePathBetweenTheKeyframes) {
+  // Keyframes 1 m apart along x, then back along y: a path of 6 m from keyframe 1 to 7.
+  std::vector<Rigid3d> world_from_rig;
+  for (int i = 0; i <= 4; ++i)
+    world_from_rig.emplace_back(Eigen::Quaterniond::Identity(), Eigen::Vector3d(i, 0, 0));
+  for (int i = 1; i <= 3; ++i)
+    world_from_rig.emplace_back(Eigen::Quaterniond::Identity(), Eigen::Vector3d(4, i, 0));
+  const Sim3d shift(1.0, Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.3, -0.4, 0.0));
+  EXPECT_NEAR(LoopDriftShare(world_from_rig, 1, 7, shift), 0.5 / 6.0, 1e-12);
+  // A scaled rotation about the revisit's own centre does not move it.
+  const Eigen::Vector3d centre = world_from_rig[7].translation;
+  const Eigen::Quaterniond turn(Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()));
+  const Sim3d about_centre(1.2, turn, centre - 1.2 * (turn * centre));
+  EXPECT_NEAR(LoopDriftShare(world_from_rig, 1, 7, about_centre), 0.0, 1e-12);
+  // No path: infinitely implausible.
+  EXPECT_EQ(LoopDriftShare(world_from_rig, 7, 7, shift), std::numeric_limits<double>::infinity());
 }
 
 TEST(LoopDetectorShortDrive, FindsTheRingOfTheDefaultRig) {

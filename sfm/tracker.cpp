@@ -742,6 +742,11 @@ void Tracker::ApplyCorrection(const std::vector<Sim3d>& new_from_old) {
         TransformPose(new_from_old[k], impl_->keyframes[k].world_from_rig);
   for (Impl::Point& point : impl_->points)
     if (point.created_by >= 0) point.position = new_from_old[point.created_by] * point.position;
+  // The last tracked frames move with the newest keyframe: otherwise the motion model predicts
+  // the next frame in the uncorrected map and every resected pose is rejected as a jump.
+  if (!new_from_old.empty())
+    for (Impl::TrackedPose& tracked : impl_->last_tracked)
+      tracked.world_from_rig = TransformPose(new_from_old.back(), tracked.world_from_rig);
 }
 
 void Tracker::MergeTracks(const std::vector<std::pair<int, int>>& drop_keep) {
@@ -787,6 +792,11 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust() {
   if (problem.observations.empty()) return {};
   const BundleAdjustmentSummary summary = LocalBundleAdjust(m.rig, options, &problem);
   if (!summary.success) return summary;
+  // The last tracked frames follow the newest keyframe (see ApplyCorrection).
+  const Rigid3d world_new_from_old =
+      problem.keyframes.back().world_from_rig * m.keyframes.back().world_from_rig.Inverse();
+  for (Impl::TrackedPose& tracked : m.last_tracked)
+    tracked.world_from_rig = world_new_from_old * tracked.world_from_rig;
   for (size_t k = 0; k < m.keyframes.size(); ++k)
     m.keyframes[k].world_from_rig = problem.keyframes[k].world_from_rig;
   for (size_t i = 0; i < point_of.size(); ++i)

@@ -149,25 +149,11 @@ bool DelaunayMesh::Impl::SingleCellTest(CellHandle c) const {
 }
 
 bool DelaunayMesh::Impl::GeneralTest(VertexHandle v) const {
-  thread_local std::vector<CellHandle> star;
-  star.clear();
-  tri.incident_cells(v, std::back_inserter(star));
   // The v-opposite edges of the δO triangles around v, as pairs of vertex handles.
   thread_local std::vector<std::pair<VertexHandle, VertexHandle>> edges;
   edges.clear();
-  for (const CellHandle& c : star) {
-    if (!c->info().in_o) continue;
-    const int i = c->index(v);
-    for (int k = 0; k < 4; ++k) {
-      if (k == i || c->neighbor(k)->info().in_o) continue;
-      VertexHandle e[2];
-      int n = 0;
-      for (int m = 0; m < 4; ++m) {
-        if (m != i && m != k) e[n++] = c->vertex(m);
-      }
-      edges.emplace_back(e[0], e[1]);
-    }
-  }
+  ForEachBorderTriangleAround(
+      tri, v, [](CellHandle, int, VertexHandle a, VertexHandle b) { edges.emplace_back(a, b); });
   if (edges.empty()) return true;
   // One cycle: every vertex of the graph has degree two and a walk along the edges from any
   // vertex comes back after using all of them.

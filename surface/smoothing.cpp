@@ -46,28 +46,15 @@ struct UmbrellaTriangle {
 
 // The δO triangles around v; empty when v is not on δO.
 void UmbrellaOf(const Delaunay& tri, VertexHandle v, std::vector<UmbrellaTriangle>& out) {
-  thread_local std::vector<CellHandle> star;
-  star.clear();
   out.clear();
-  tri.incident_cells(v, std::back_inserter(star));
-  for (const CellHandle& c : star) {
-    if (!c->info().in_o) continue;
-    const int i = c->index(v);
-    for (int k = 0; k < 4; ++k) {
-      if (k == i || c->neighbor(k)->info().in_o) continue;
-      VertexHandle e[2];
-      int n = 0;
-      for (int m = 0; m < 4; ++m) {
-        if (m != i && m != k) e[n++] = c->vertex(m);
-      }
-      // Counter-clockwise seen from O: the cell's vertex k (on O's side) above (v, a, b).
-      if (CGAL::orientation(v->point(), e[0]->point(), e[1]->point(), c->vertex(k)->point()) ==
-          CGAL::NEGATIVE) {
-        std::swap(e[0], e[1]);
-      }
-      out.push_back({e[0], e[1]});
+  ForEachBorderTriangleAround(tri, v, [&](CellHandle c, int k, VertexHandle a, VertexHandle b) {
+    // Counter-clockwise seen from O: the cell's vertex k (on O's side) above (v, a, b).
+    if (CGAL::orientation(v->point(), a->point(), b->point(), c->vertex(k)->point()) ==
+        CGAL::NEGATIVE) {
+      std::swap(a, b);
     }
-  }
+    out.push_back({a, b});
+  });
 }
 
 uint64_t UmbrellaHash(const std::vector<UmbrellaTriangle>& umbrella) {

@@ -52,6 +52,29 @@ using CellHandle = Delaunay::Cell_handle;
 inline Point ToCgal(const Eigen::Vector3d& p) { return Point(p.x(), p.y(), p.z()); }
 inline Eigen::Vector3d ToEigen(const Point& p) { return Eigen::Vector3d(p.x(), p.y(), p.z()); }
 
+// Calls visit(cell, k, a, b) for each δO triangle around v: facet k of a cell of O incident to v
+// whose neighbour across it is outside O; a and b are the facet's vertices other than v (its
+// v-opposite edge), in the cell's vertex order.
+template <class Visit>
+void ForEachBorderTriangleAround(const Delaunay& tri, VertexHandle v, Visit&& visit) {
+  thread_local std::vector<CellHandle> star;
+  star.clear();
+  tri.incident_cells(v, std::back_inserter(star));
+  for (const CellHandle& c : star) {
+    if (!c->info().in_o) continue;
+    const int i = c->index(v);
+    for (int k = 0; k < 4; ++k) {
+      if (k == i || c->neighbor(k)->info().in_o) continue;
+      VertexHandle e[2];
+      int n = 0;
+      for (int m = 0; m < 4; ++m) {
+        if (m != i && m != k) e[n++] = c->vertex(m);
+      }
+      visit(c, k, e[0], e[1]);
+    }
+  }
+}
+
 }  // namespace omni::internal
 
 namespace omni {

@@ -1,6 +1,5 @@
 #include "apps/surface/gt_keyframes.h"
 
-#include <embree3/rtcore.h>
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>
@@ -12,6 +11,7 @@
 #include <stdexcept>
 #include <unordered_map>
 
+#include "apps/eval/raycast.h"
 #include "calib/drive.h"
 #include "calib/error.h"
 #include "calib/rig_io.h"
@@ -20,65 +20,15 @@
 namespace omni {
 namespace {
 
-class RayCaster {
- public:
-  explicit RayCaster(const TriangleMesh& mesh) {
-    device_ = rtcNewDevice(nullptr);
-    if (!device_) throw std::runtime_error("Embree: rtcNewDevice failed");
-    scene_ = rtcNewScene(device_);
-    RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* vertices = static_cast<float*>(
-        rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                3 * sizeof(float), mesh.vertices.size()));
-    auto* indices = static_cast<unsigned*>(
-        rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                3 * sizeof(unsigned), mesh.triangles.size()));
-    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
-      for (int k = 0; k < 3; ++k) vertices[3 * i + k] = static_cast<float>(mesh.vertices[i][k]);
-    }
-    for (size_t i = 0; i < mesh.triangles.size(); ++i) {
-      for (int k = 0; k < 3; ++k) indices[3 * i + k] = static_cast<unsigned>(mesh.triangles[i][k]);
-    }
-    rtcCommitGeometry(geometry);
-    rtcAttachGeometry(scene_, geometry);
-    rtcReleaseGeometry(geometry);
-    rtcCommitScene(scene_);
-  }
-  ~RayCaster() {
-    rtcReleaseScene(scene_);
-    rtcReleaseDevice(device_);
-  }
-  RayCaster(const RayCaster&) = delete;
-  RayCaster& operator=(const RayCaster&) = delete;
-
-  // Distance to the first hit along the unit direction, infinity when none.
-  double Cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
-              double max_distance) const {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    RTCRayHit rh;
-    rh.ray.org_x = static_cast<float>(origin.x());
-    rh.ray.org_y = static_cast<float>(origin.y());
-    rh.ray.org_z = static_cast<float>(origin.z());
-    rh.ray.dir_x = static_cast<float>(direction.x());
-    rh.ray.dir_y = static_cast<float>(direction.y());
-    rh.ray.dir_z = static_cast<float>(direction.z());
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = static_cast<float>(max_distance);
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.time = 0.0f;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(scene_, &context, &rh);
-    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return std::numeric_limits<double>::infinity();
-    return rh.ray.tfar;
-  }
-
- private:
-  RTCDevice device_ = nullptr;
-  RTCScene scene_ = nullptr;
-};
+// Distance to the first hit of the GT mesh along the unit direction, infinity when none.
+double CastDistance(const RayCaster& caster, const Eigen::Vector3d& origin,
+                    const Eigen::Vector3d& direction, double max_distance) {
+  Ray ray;
+  ray.origin = origin;
+  ray.direction = direction;
+  ray.max_distance = max_distance;
+  return caster.Cast(ray).distance;
+}
 
 // The rays of a point p of keyframe t: from the centres of t and of the earlier keyframes (at
 // most max_observing_keyframes) that see p unoccluded within max_distance.
@@ -89,7 +39,7 @@ void AddRays(const RayCaster& caster, const std::vector<Eigen::Vector3d>& centre
     const Eigen::Vector3d to = p - centres[k];
     const double dist = to.norm();
     if (dist > max_distance || dist < 1e-6) continue;
-    const double hit = caster.Cast(centres[k], to / dist, dist * 1.01 + 1e-3);
+    const double hit = CastDistance(caster, centres[k], to / dist, dist * 1.01 + 1e-3);
     if (hit < dist * (1.0 - 1e-3) - 1e-3) continue;  // occluded
     point->rays.push_back({KeyframeId(static_cast<uint32_t>(k)), centres[k]});
   }
@@ -144,25 +94,60 @@ class PointHash {
   std::unordered_map<uint64_t, std::vector<Eigen::Vector3d>> cells_;
 };
 
-// The point of keyframe t on the surface at p, with its rays, appended to kf when at least
-// min_rays keyframes see it (then true); its position gets the point noise.
-bool AppendObservedPoint(const RayCaster& caster, const std::vector<Eigen::Vector3d>& centres,
-                         size_t t, const Eigen::Vector3d& p, double max_distance,
-                         const GtKeyframeOptions& options, std::mt19937_64& rng,
-                         std::normal_distribution<double>& gauss, uint32_t* next_point,
-                         SurfaceKeyframe* kf) {
-  SurfacePoint point;
-  point.id = PointId(*next_point);
-  AddRays(caster, centres, t, p, max_distance, options, &point);
-  if (static_cast<int>(point.rays.size()) < options.min_rays) return false;
-  point.position = p;
-  if (options.point_noise > 0) {
-    point.position += options.point_noise * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
+// What both samplers share: the checked options, the GT ray caster, the seeded point stream
+// and the ids of the points made so far.
+class GtPointSampler {
+ public:
+  GtPointSampler(const TriangleMesh& mesh, const GtKeyframeOptions& options)
+      : options_(CheckedOptions(options)),
+        caster_(mesh),
+        rng_(options.seed),
+        max_distance_(options.max_distance_factor * options.keyframe_spacing) {}
+
+  const RayCaster& caster() const { return caster_; }
+  std::mt19937_64& rng() { return rng_; }
+  std::normal_distribution<double>& gauss() { return gauss_; }
+  double max_distance() const { return max_distance_; }
+
+  // The keyframes to make out of `available` (options.max_keyframes, 0: all).
+  size_t NumKeyframes(size_t available) const {
+    return options_.max_keyframes > 0
+               ? std::min(available, static_cast<size_t>(options_.max_keyframes))
+               : available;
   }
-  ++*next_point;
-  kf->points.push_back(std::move(point));
-  return true;
-}
+
+  // The point of keyframe t on the surface at p, with its rays, appended to kf when at least
+  // min_rays keyframes see it (then true); its position gets the point noise.
+  bool AppendObservedPoint(const std::vector<Eigen::Vector3d>& centres, size_t t,
+                           const Eigen::Vector3d& p, SurfaceKeyframe* kf) {
+    SurfacePoint point;
+    point.id = PointId(next_point_);
+    AddRays(caster_, centres, t, p, max_distance_, options_, &point);
+    if (static_cast<int>(point.rays.size()) < options_.min_rays) return false;
+    point.position = p;
+    if (options_.point_noise > 0) {
+      point.position +=
+          options_.point_noise * Eigen::Vector3d(gauss_(rng_), gauss_(rng_), gauss_(rng_));
+    }
+    ++next_point_;
+    kf->points.push_back(std::move(point));
+    return true;
+  }
+
+ private:
+  static const GtKeyframeOptions& CheckedOptions(const GtKeyframeOptions& options) {
+    const std::string problem = options.Check();
+    if (!problem.empty()) throw std::invalid_argument("GtKeyframeOptions: " + problem);
+    return options;
+  }
+
+  const GtKeyframeOptions& options_;
+  const RayCaster caster_;
+  std::mt19937_64 rng_;
+  std::normal_distribution<double> gauss_{0.0, 1.0};
+  const double max_distance_;
+  uint32_t next_point_ = 0;
+};
 
 }  // namespace
 
@@ -195,17 +180,9 @@ std::vector<size_t> SelectKeyframeFrames(const std::vector<Eigen::Vector3d>& cen
 std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
                                              const std::vector<Eigen::Vector3d>& centres,
                                              const GtKeyframeOptions& options) {
-  const std::string problem = options.Check();
-  if (!problem.empty()) throw std::invalid_argument("GtKeyframeOptions: " + problem);
-  const RayCaster caster(mesh);
-  std::mt19937_64 rng(options.seed);
-  std::normal_distribution<double> gauss(0.0, 1.0);
-  const double max_distance = options.max_distance_factor * options.keyframe_spacing;
+  GtPointSampler sampler(mesh, options);
   std::vector<SurfaceKeyframe> stream;
-  uint32_t next_point = 0;
-  const size_t n = options.max_keyframes > 0
-                       ? std::min(centres.size(), static_cast<size_t>(options.max_keyframes))
-                       : centres.size();
+  const size_t n = sampler.NumKeyframes(centres.size());
   for (size_t t = 0; t < n; ++t) {
     SurfaceKeyframe kf;
     kf.id = KeyframeId(static_cast<uint32_t>(t));
@@ -213,13 +190,12 @@ std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
     const int attempts = 8 * options.points_per_keyframe;
     for (int a = 0;
          a < attempts && static_cast<int>(kf.points.size()) < options.points_per_keyframe; ++a) {
-      Eigen::Vector3d dir(gauss(rng), gauss(rng), gauss(rng));
+      std::normal_distribution<double>& gauss = sampler.gauss();
+      Eigen::Vector3d dir(gauss(sampler.rng()), gauss(sampler.rng()), gauss(sampler.rng()));
       dir.normalize();
-      const double d = caster.Cast(kf.centre, dir, max_distance);
+      const double d = CastDistance(sampler.caster(), kf.centre, dir, sampler.max_distance());
       if (!std::isfinite(d)) continue;
-      const Eigen::Vector3d p = kf.centre + d * dir;
-      AppendObservedPoint(caster, centres, t, p, max_distance, options, rng, gauss, &next_point,
-                          &kf);
+      sampler.AppendObservedPoint(centres, t, kf.centre + d * dir, &kf);
     }
     stream.push_back(std::move(kf));
   }
@@ -231,21 +207,13 @@ std::vector<SurfaceKeyframe> MakeGtKeyframesAtCorners(const TriangleMesh& mesh, 
                                                       const std::vector<Rigid3d>& world_from_rig,
                                                       const GtKeyframeImages& images,
                                                       const GtKeyframeOptions& options) {
-  const std::string problem = options.Check();
-  if (!problem.empty()) throw std::invalid_argument("GtKeyframeOptions: " + problem);
-  const RayCaster caster(mesh);
-  std::mt19937_64 rng(options.seed);
-  std::normal_distribution<double> gauss(0.0, 1.0);
-  const double max_distance = options.max_distance_factor * options.keyframe_spacing;
-  const size_t n = options.max_keyframes > 0
-                       ? std::min(world_from_rig.size(), static_cast<size_t>(options.max_keyframes))
-                       : world_from_rig.size();
+  GtPointSampler sampler(mesh, options);
+  const size_t n = sampler.NumKeyframes(world_from_rig.size());
   const Eigen::Vector3d centre_in_rig = rig.CentralCenterInRig();
   std::vector<Eigen::Vector3d> centres;
   for (size_t t = 0; t < n; ++t) centres.push_back(world_from_rig[t] * centre_in_rig);
   PointHash made(options.corner_merge_distance);
   std::vector<SurfaceKeyframe> stream;
-  uint32_t next_point = 0;
   for (size_t t = 0; t < n; ++t) {
     SurfaceKeyframe kf;
     kf.id = KeyframeId(static_cast<uint32_t>(t));
@@ -261,7 +229,7 @@ std::vector<SurfaceKeyframe> MakeGtKeyframesAtCorners(const TriangleMesh& mesh, 
         corners.emplace_back(static_cast<int>(c),
                              PreparedToInputPixel(corner.pixel, options.harris.downscale));
     }
-    std::shuffle(corners.begin(), corners.end(), rng);
+    std::shuffle(corners.begin(), corners.end(), sampler.rng());
     for (const auto& [c, pixel] : corners) {
       if (static_cast<int>(kf.points.size()) >= options.points_per_keyframe) break;
       const Camera& camera = rig.cameras[c];
@@ -269,13 +237,12 @@ std::vector<SurfaceKeyframe> MakeGtKeyframesAtCorners(const TriangleMesh& mesh, 
       if (!camera.Unproject(pixel, &bearing)) continue;
       const Rigid3d world_from_cam = world_from_rig[t] * camera.cam_from_rig.Inverse();
       const Eigen::Vector3d direction = (world_from_cam.rotation * bearing).normalized();
-      const double d = caster.Cast(world_from_cam.translation, direction, max_distance);
+      const double d = CastDistance(sampler.caster(), world_from_cam.translation, direction,
+                                    sampler.max_distance());
       if (!std::isfinite(d)) continue;
       const Eigen::Vector3d p = world_from_cam.translation + d * direction;
       if (made.HasPointWithin(p)) continue;  // a corner seen again: the same track
-      if (AppendObservedPoint(caster, centres, t, p, max_distance, options, rng, gauss, &next_point,
-                              &kf))
-        made.Add(p);
+      if (sampler.AppendObservedPoint(centres, t, p, &kf)) made.Add(p);
     }
     stream.push_back(std::move(kf));
   }

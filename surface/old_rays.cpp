@@ -29,26 +29,37 @@ NewCellBorder::NewCellBorder(const Delaunay& tri, const std::vector<CellHandle>&
   // Voxels within this distance of a facet are registered too, far above the rounding of the
   // DDA of RayGrid (which may skip a voxel that a segment grazes at an edge or a corner).
   const double pad = 1e-6 * step;
+  std::vector<std::pair<uint64_t, uint32_t>> registered;  // (voxel key, facet id)
   for (const CellHandle& c : n_cells) {
     for (int k = 0; k < 4; ++k) {
       const CellHandle nb = c->neighbor(k);
       if (nb->info().date == date || tri.is_infinite(nb)) continue;
-      const Eigen::Vector3d a = ToEigen(c->vertex((k + 1) & 3)->point());
-      const Eigen::Vector3d b = ToEigen(c->vertex((k + 2) & 3)->point());
-      const Eigen::Vector3d d = ToEigen(c->vertex((k + 3) & 3)->point());
+      FacetOf of;
+      of.cell = c;
+      of.index = k;
+      Eigen::Vector3d corner[3];
+      for (int j = 0; j < 3; ++j) {
+        of.vertex[j] = c->vertex((k + 1 + j) & 3);
+        corner[j] = ToEigen(of.vertex[j]->point());
+      }
+      const Eigen::Vector3d &a = corner[0], &b = corner[1], &d = corner[2];
       Facet facet;
-      facet.cell = c;
-      facet.index = k;
-      facet.corner[0] = a;
-      facet.corner[1] = b;
-      facet.corner[2] = d;
       facet.normal = (b - a).cross(d - a);
       facet.offset = facet.normal.dot(a);
       facet.extent = std::max(
           {a.cwiseAbs().maxCoeff(), b.cwiseAbs().maxCoeff(), d.cwiseAbs().maxCoeff(), 1.0});
-      facet.tolerance = kRelativeTolerance * facet.normal.norm();
+      facet.norm = facet.normal.norm();
+      facet.tolerance = kRelativeTolerance * facet.norm;
+      for (int e = 0; e < 3; ++e) {
+        const Eigen::Vector3d edge = corner[(e + 1) % 3] - corner[e];
+        // normal · (edge × (x − p)) = (normal × edge) · (x − p), p = corner[e].
+        facet.edge_normal[e] = facet.normal.cross(edge);
+        facet.edge_offset[e] = facet.edge_normal[e].dot(corner[e]);
+        facet.edge_slack[e] = 1e-7 * facet.norm * edge.norm();
+      }
       const uint32_t id = static_cast<uint32_t>(facets_.size());
       facets_.push_back(facet);
+      facet_of_.push_back(of);
       Eigen::AlignedBox3d box(a);
       box.extend(b);
       box.extend(d);
@@ -65,14 +76,26 @@ NewCellBorder::NewCellBorder(const Delaunay& tri, const std::vector<CellHandle>&
             // Skip voxels (grown by pad) wholly on one side of the facet's plane.
             const Eigen::Vector3d centre = (Eigen::Vector3d(i, j, m).array() + 0.5) * step;
             if (std::abs(n.dot(centre) - facet.offset) > reach) continue;
-            std::vector<uint32_t>& ids = cells_of_voxel_[VoxelGrid::Key(Eigen::Vector3i(i, j, m))];
-            if (ids.empty()) keys_.push_back(VoxelGrid::Key(Eigen::Vector3i(i, j, m)));
-            ids.push_back(id);
+            registered.emplace_back(VoxelGrid::Key(Eigen::Vector3i(i, j, m)), id);
           }
         }
       }
     }
   }
+  // Facet ids grouped by voxel (ids ascending within a voxel).
+  std::sort(registered.begin(), registered.end());
+  ids_.reserve(registered.size());
+  for (size_t r = 0; r < registered.size(); ++r) {
+    if (r == 0 || registered[r].first != registered[r - 1].first) {
+      keys_.push_back(registered[r].first);
+      first_.push_back(static_cast<uint32_t>(ids_.size()));
+    }
+    ids_.push_back(registered[r].second);
+  }
+  first_.push_back(static_cast<uint32_t>(ids_.size()));
+  voxel_index_.reserve(keys_.size());
+  for (size_t i = 0; i < keys_.size(); ++i)
+    voxel_index_.emplace(keys_[i], static_cast<uint32_t>(i));
 }
 
 namespace {
@@ -125,44 +148,63 @@ bool NewCellBorder::Entries(VertexHandle from_vertex, const Point& target,
     query = 0;
   }
   ++query;
+  uint32_t* const tested_by = tested.data();  // the thread_local looked up once
+  const uint32_t this_query = query;
   const Point& from = from_vertex->point();
   const Eigen::Vector3d a = ToEigen(from), b = ToEigen(target);
+  const Eigen::Vector3d ab = b - a;
+  const double length = ab.norm();
   const double extent = std::max(a.cwiseAbs().maxCoeff(), b.cwiseAbs().maxCoeff());
   bool clean = true;
   grid_.ForEachVoxelOnSegment(a, b, [&](uint64_t key) {
     if (!clean) return;
-    const auto it = cells_of_voxel_.find(key);
-    if (it == cells_of_voxel_.end()) return;
-    for (uint32_t id : it->second) {
-      if (tested[id] == query) continue;
-      tested[id] = query;
+    const auto it = voxel_index_.find(key);
+    if (it == voxel_index_.end()) return;
+    const uint32_t* id_end = ids_.data() + first_[it->second + 1];
+    for (const uint32_t* pid = ids_.data() + first_[it->second]; pid != id_end; ++pid) {
+      const uint32_t id = *pid;
+      if (tested_by[id] == this_query) continue;
+      tested_by[id] = this_query;
       const Facet& f = facets_[id];
       const double sa = f.normal.dot(a) - f.offset, sb = f.normal.dot(b) - f.offset;
-      const double tol = f.tolerance * std::max(f.extent, extent);
+      const double scale = std::max(f.extent, extent);
+      const double tol = f.tolerance * scale;
       if ((sa > tol && sb > tol) || (sa < -tol && sb < -tol)) {
         continue;  // both ends strictly on one side of the facet's plane
       }
       if ((sa > tol && sb < -tol) || (sa < -tol && sb > tol)) {
         // A clear crossing of the plane, not too grazing: the crossing point is accurate, so
         // a point clearly out of the facet (beyond one edge's line) meets nothing.
-        const double nn = f.normal.norm();
-        if (std::abs(sa - sb) > 1e-3 * nn * (b - a).norm()) {
-          const Eigen::Vector3d x = a + (sa / (sa - sb)) * (b - a);
+        if (std::abs(sa - sb) > 1e-3 * f.norm * length) {
+          const Eigen::Vector3d x = a + (sa / (sa - sb)) * ab;
           bool outside = false;
           for (int e = 0; e < 3 && !outside; ++e) {
-            const Eigen::Vector3d& p = f.corner[e];
-            const Eigen::Vector3d edge = f.corner[(e + 1) % 3] - p;
-            const double side = f.normal.dot(edge.cross(x - p));
-            if (side < -1e-7 * nn * edge.norm() * std::max(f.extent, extent)) outside = true;
+            if (f.edge_normal[e].dot(x) - f.edge_offset[e] < -f.edge_slack[e] * scale) {
+              outside = true;
+            }
           }
           if (outside) continue;
         }
       }
-      switch (FacetEntry(from, target, f.cell, f.index)) {
+      const FacetOf& of = facet_of_[id];
+      if (of.vertex[0] == from_vertex || of.vertex[1] == from_vertex ||
+          of.vertex[2] == from_vertex) {
+        // from is a corner of the facet, so exactly on its plane (FacetEntry's first predicate
+        // is ZERO, which only exact arithmetic would certify): the segment enters nowhere through
+        // it unless it lies in the plane (a predicate the static filter settles when target is
+        // clearly off the plane).
+        if (CGAL::orientation(of.vertex[0]->point(), of.vertex[1]->point(), of.vertex[2]->point(),
+                              target) != CGAL::ZERO) {
+          continue;
+        }
+        clean = false;  // the segment lies in the facet's plane (FacetEntry: kDegenerate)
+        return;
+      }
+      switch (FacetEntry(from, target, of.cell, of.index)) {
         case Crossing::kNone:
           break;
         case Crossing::kEnters:
-          entries->emplace_back(f.cell, f.index);
+          entries->emplace_back(of.cell, of.index);
           break;
         case Crossing::kDegenerate:
           clean = false;

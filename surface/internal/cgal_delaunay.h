@@ -158,41 +158,60 @@ void DelaunayMesh::Impl::Walk(internal::VertexHandle from, const internal::Point
   const internal::Point& p = from->point();
   if (p == target) return;
   // Start: an incident cell of `from` whose cone at `from` the segment enters, i.e. the target
-  // is on the inner side of the three facets through `from`.
-  // The star of `from` by a search over neighbours (CGAL's incident_cells marks cells of the
-  // shared data structure, so it is not safe in parallel walks).
-  thread_local std::vector<CellHandle> star;
-  star.clear();
-  star.push_back(from->cell());
-  for (size_t s = 0; s < star.size(); ++s) {
-    const CellHandle c = star[s];
-    for (int k = 0; k < 4; ++k) {
-      if (c->vertex(k) == from) continue;
-      const CellHandle n = c->neighbor(k);
-      if (std::find(star.begin(), star.end(), n) == star.end()) star.push_back(n);
+  // is on the inner side of the three facets through `from`: the first facet through `from`
+  // with the target strictly beyond it (-1: none, the segment enters c's cone).
+  auto beyond = [&](CellHandle c, int i) {
+    const std::array<const internal::Point*, 4> v = {&c->vertex(0)->point(), &c->vertex(1)->point(),
+                                                     &c->vertex(2)->point(),
+                                                     &c->vertex(3)->point()};
+    for (int j = 0; j < 4; ++j) {
+      if (j == i) continue;
+      std::array<const internal::Point*, 4> q = v;
+      q[j] = &target;
+      if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) == CGAL::NEGATIVE) return j;
+    }
+    return -1;
+  };
+  // A visibility walk in the star: across a facet through `from` with the target beyond it
+  // (a few cells where a search of the whole star tests them all). Bounded, since a visibility
+  // walk may cycle in a non-Delaunay star; then (or at an infinite cell) the search below.
+  CellHandle cell;
+  {
+    constexpr int kMaxStarSteps = 64;
+    CellHandle c = from->cell();
+    for (int steps = 0; steps < kMaxStarSteps && !tri.is_infinite(c); ++steps) {
+      const int j = beyond(c, c->index(from));
+      if (j < 0) {
+        cell = c;
+        break;
+      }
+      c = c->neighbor(j);
     }
   }
-  CellHandle cell;
-  int entry = -1;  // index of the facet we entered through (-1: the start vertex's cell)
-  for (const CellHandle& c : star) {
-    if (tri.is_infinite(c)) continue;
-    const int i = c->index(from);
-    bool enters = true;
-    for (int j = 0; j < 4 && enters; ++j) {
-      if (j == i) continue;
-      std::array<const internal::Point*, 4> q = {&c->vertex(0)->point(), &c->vertex(1)->point(),
-                                                 &c->vertex(2)->point(), &c->vertex(3)->point()};
-      q[j] = &target;
-      if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) == CGAL::NEGATIVE) enters = false;
+  if (cell == CellHandle()) {
+    // The star of `from` by a search over neighbours (CGAL's incident_cells marks cells of the
+    // shared data structure, so it is not safe in parallel walks).
+    thread_local std::vector<CellHandle> star;
+    star.clear();
+    star.push_back(from->cell());
+    for (size_t s = 0; s < star.size(); ++s) {
+      const CellHandle c = star[s];
+      for (int k = 0; k < 4; ++k) {
+        if (c->vertex(k) == from) continue;
+        const CellHandle n = c->neighbor(k);
+        if (std::find(star.begin(), star.end(), n) == star.end()) star.push_back(n);
+      }
     }
-    if (enters) {
-      cell = c;
-      entry = i;  // the exit is the facet opposite `from`
-      break;
+    for (const CellHandle& c : star) {
+      if (!tri.is_infinite(c) && beyond(c, c->index(from)) < 0) {
+        cell = c;
+        break;
+      }
     }
   }
   if (cell == CellHandle()) return;  // only infinite cells ahead: the target is off the hull
-  WalkLoop(p, target, cell, entry, /*first=*/true, stop, visit);
+  // The exit is the facet opposite `from`.
+  WalkLoop(p, target, cell, cell->index(from), /*first=*/true, stop, visit);
 }
 
 inline int DelaunayMesh::Impl::EntryFacet(const internal::Point& from,

@@ -84,21 +84,37 @@ class NewCellBorder {
   bool Entries(VertexHandle from, const Point& target, std::vector<CellFacet>* entries) const;
 
  private:
+  // What the double-precision filter of Entries reads, packed (it runs over every facet in the
+  // voxels of every candidate ray).
   struct Facet {
-    CellHandle cell;
-    int index;
-    Eigen::Vector3d corner[3];  // the facet's vertices a, b, d (cyclic order of the cell)
-    Eigen::Vector3d normal;     // (b − a) × (d − a)
-    double offset;              // normal · a
-    double extent;              // largest coordinate magnitude of the facet (at least 1)
+    Eigen::Vector3d normal;  // (b − a) × (d − a) of the facet's vertices a, b, d
+    double offset;           // normal · a
+    double extent;           // largest coordinate magnitude of the facet (at least 1)
     // Times the largest coordinate magnitude involved: a bound of the rounding of
     // normal · x − offset.
     double tolerance;
+    double norm;  // ‖normal‖
+    // Edge e (from corner e to corner e+1): x is beyond its line, seen along the normal, when
+    // edge_normal[e] · x − edge_offset[e] < −edge_slack[e] · (largest coordinate magnitude).
+    // edge_normal[e] = normal × (corner[e+1] − corner[e]).
+    Eigen::Vector3d edge_normal[3];
+    double edge_offset[3];
+    double edge_slack[3];
+  };
+  // The facet itself: the N cell and the index of the vertex opposite the facet, and the facet's
+  // vertices a, b, d (cyclic order of the cell).
+  struct FacetOf {
+    CellHandle cell;
+    int index;
+    VertexHandle vertex[3];
   };
   const Delaunay& tri_;
   const VoxelGrid& grid_;
   std::vector<Facet> facets_;
-  std::unordered_map<uint64_t, std::vector<uint32_t>> cells_of_voxel_;  // facet ids per voxel
+  std::vector<FacetOf> facet_of_;
+  // Facet ids per voxel: those of keys_[i] are ids_[first_[i]] .. ids_[first_[i + 1] − 1].
+  std::unordered_map<uint64_t, uint32_t> voxel_index_;  // key → i
+  std::vector<uint32_t> first_, ids_;
   std::vector<uint64_t> keys_;
 };
 

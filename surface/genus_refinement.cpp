@@ -9,11 +9,16 @@
 // star changes): first the cells around an edge, then connected groups of F \ O grown from a
 // seed by largest counter, of doubling size up to a bound. Seeds are the cells of F \ O touching
 // δO, most crossed first (the most certain free space first).
+//
+// Cost (issue 6): a group is tested before its local χ is counted (most groups fail), the vertex
+// that failed last is tested first, and a group that failed since O last changed is not tested
+// again (seeds of one small component grow the same group): the outcome is the same.
 
 #include "surface/genus_refinement.h"
 
 #include <algorithm>
 #include <queue>
+#include <set>
 #include <unordered_set>
 
 #include "surface/internal/step6.h"
@@ -48,8 +53,8 @@ bool EdgeOnSurface(const Delaunay& tri, CellHandle c, int i, int j) {
 
 class Refiner {
  public:
-  Refiner(DelaunayMesh::Impl& t, const std::function<bool(CellHandle)>& in_region)
-      : t_(t), in_region_(in_region) {}
+  Refiner(DelaunayMesh::Impl& t, const std::function<bool(CellHandle)>& in_region, bool reference)
+      : t_(t), in_region_(in_region), reference_(reference) {}
 
   // A cell of F \ O in the region.
   bool Candidate(CellHandle c) const {
@@ -58,17 +63,37 @@ class Refiner {
 
   // Adds the group to O if δO stays a 2-manifold, then grows one cell at once from it.
   bool TryGroup(const std::vector<CellHandle>& group) {
+    // The outcome depends only on the group's cells and on O: a group that failed since the
+    // last change of O fails again.
+    std::vector<CellHandle> key = group;
+    std::sort(key.begin(), key.end());
+    if (!reference_ && failed_.count(key)) return false;
     const std::vector<VertexHandle> vertices = VerticesOf(group);
-    const long before = LocalEuler(group, vertices);
     for (const CellHandle& c : group) t_.SetInO(c, true);
-    for (const VertexHandle& v : vertices) {
-      if (!t_.GeneralTest(v)) {
-        for (const CellHandle& c : group) t_.SetInO(c, false);
-        return false;
+    // All must pass, so the order does not matter: the vertex that failed last (often in the
+    // next, larger group of the same seed) first.
+    const bool retest = !reference_ && last_failed_ != VertexHandle() &&
+                        std::find(vertices.begin(), vertices.end(), last_failed_) != vertices.end();
+    bool passed = !retest || t_.GeneralTest(last_failed_);
+    for (size_t i = 0; passed && i < vertices.size(); ++i) {
+      if (retest && vertices[i] == last_failed_) continue;
+      if (!t_.GeneralTest(vertices[i])) {
+        passed = false;
+        last_failed_ = vertices[i];
       }
     }
+    if (!passed) {
+      for (const CellHandle& c : group) t_.SetInO(c, false);
+      if (!reference_) failed_.insert(std::move(key));
+      return false;
+    }
+    // Accepted (most groups are not): the local χ before and after.
+    for (const CellHandle& c : group) t_.SetInO(c, false);
+    const long before = LocalEuler(group, vertices);
+    for (const CellHandle& c : group) t_.SetInO(c, true);
     euler_change_ += LocalEuler(group, vertices) - before;
     ++groups_;
+    failed_.clear();
     std::vector<CellHandle> next;
     for (const CellHandle& c : group) {
       for (int i = 0; i < 4; ++i) next.push_back(c->neighbor(i));
@@ -170,8 +195,11 @@ class Refiner {
 
   DelaunayMesh::Impl& t_;
   const std::function<bool(CellHandle)>& in_region_;
+  bool reference_;
   long euler_change_ = 0;
   size_t groups_ = 0;
+  std::set<std::vector<CellHandle>> failed_;  // groups (sorted) rejected since O last changed
+  VertexHandle last_failed_;                  // the vertex whose general test failed last
 };
 
 }  // namespace
@@ -180,7 +208,7 @@ GenusRefinementResult RefineGenus(DelaunayMesh::Impl& t, const std::vector<CellH
                                   const std::function<bool(CellHandle)>& in_region,
                                   const GenusRefinementOptions& options) {
   GenusRefinementResult result;
-  Refiner refiner(t, in_region);
+  Refiner refiner(t, in_region, options.reference);
   std::vector<CellHandle> seeds;
   for (const CellHandle& c : region) {
     if (!refiner.Candidate(c)) continue;

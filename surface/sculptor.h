@@ -50,6 +50,9 @@ struct GenusRefinementOptions {
   bool enabled = true;       // on the cells of E ∪ N ∪ the cells crossed by new rays
   bool edge_stars = true;    // try the F \ O cells around each edge at once
   int max_group_cells = 32;  // largest connected group of F \ O cells tried at once (0: none)
+  // Test reference: no memo of the groups that failed since O last changed, vertices tested in
+  // index order. Same outcome, slower.
+  bool reference = false;
   std::string Check() const;
 };
 
@@ -78,6 +81,10 @@ struct SmoothingOptions {
   // Rejects a move that leaves an incident triangle with an area below this fraction of its
   // squared longest edge (a near-degenerate triangle), besides flips.
   double min_triangle_shape = 1e-4;
+  // Test reference for the local intersection checks: each check gathers the δO triangles
+  // around the vertex anew and tests every pair whose boxes meet the umbrella's (no per-keyframe
+  // cache, no per-triangle box filter, no inexact side pre-check). Same positions, slower.
+  bool reference_checks = false;
   std::string Check() const;
 };
 

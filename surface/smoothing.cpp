@@ -9,13 +9,21 @@
 // around each moved vertex are tested against the δO triangles of the Delaunay neighbourhood
 // (exact predicates) and a vertex whose triangles meet one goes back to its previous position,
 // then to its own point.
+//
+// Cost (issue 6): positions, umbrella hashes and the scratch of a call are dense arrays by vertex
+// index (no hash map in the inner loops); the δO facets around a vertex are gathered once per
+// call and shared by the checks of all its neighbours; a pair of triangles whose boxes miss, or
+// one certainly on one side of the other's plane (a filter in doubles with a wide error bound),
+// skips the exact tests. The reference path (SmoothingOptions::reference_checks) gathers anew
+// and tests every pair: tests/surface/smoothing_test.cpp checks that both give the same
+// positions.
 
 #include <CGAL/intersections.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
-#include <unordered_set>
+#include <initializer_list>
 
 #include "surface/internal/step6.h"
 
@@ -58,7 +66,8 @@ void UmbrellaOf(const Delaunay& tri, VertexHandle v, std::vector<UmbrellaTriangl
 }
 
 uint64_t UmbrellaHash(const std::vector<UmbrellaTriangle>& umbrella) {
-  std::vector<uint64_t> keys;
+  thread_local std::vector<uint64_t> keys;
+  keys.clear();
   for (const UmbrellaTriangle& t : umbrella) {
     keys.push_back((static_cast<uint64_t>(t.a->info().index) << 32) |
                    static_cast<uint32_t>(t.b->info().index));
@@ -73,19 +82,206 @@ uint64_t UmbrellaHash(const std::vector<UmbrellaTriangle>& umbrella) {
   return h;
 }
 
-struct Local {
-  VertexHandle v;
-  Eigen::Vector3d x, previous, own;
-  std::vector<UmbrellaTriangle> umbrella;
-  std::vector<VertexHandle> ring;  // distinct neighbours on δO
-  int reverts = 0;
-};
+// The side of q with respect to the oriented plane of (p0, p1, p2): +1 or -1 when certain
+// (then the sign of CGAL::orientation(p0, p1, p2, q)), 0 when q is too near the plane to tell in
+// doubles. The bound is over 100 times the rounding error of the determinant (CGAL's static
+// filter for orientation_3 uses 5.1e-15 for the same product of coordinate ranges).
+inline int CertainSide(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
+                       const Eigen::Vector3d& p2, const Eigen::Vector3d& q) {
+  const Eigen::Vector3d a = p1 - p0, b = p2 - p0, c = q - p0;
+  const double det = a.cross(b).dot(c);
+  const Eigen::Vector3d range = a.cwiseAbs().cwiseMax(b.cwiseAbs()).cwiseMax(c.cwiseAbs());
+  const double bound = 1e-12 * range.x() * range.y() * range.z();
+  return det > bound ? 1 : det < -bound ? -1 : 0;
+}
+
+// Whether the points are all certainly on one side of the plane of (p0, p1, p2).
+inline bool CertainlyAside(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
+                           const Eigen::Vector3d& p2,
+                           std::initializer_list<Eigen::Vector3d> points) {
+  int first = 0;
+  for (const Eigen::Vector3d& q : points) {
+    const int side = CertainSide(p0, p1, p2, q);
+    if (side == 0 || (first != 0 && side != first)) return false;
+    first = side;
+  }
+  return true;
+}
 
 }  // namespace
 
+void SurfaceSmoother::Grow(const DelaunayMesh::Impl& t) {
+  const size_t n = t.vertices.size();
+  for (size_t i = out_.size(); i < n; ++i) out_.push_back(ToEigen(t.vertices[i]->point()));
+  moved_.resize(n, 0);
+  has_umbrella_.resize(n, 0);
+  umbrella_.resize(n, 0);
+  slot_stamp_.resize(n, 0);
+  star_stamp_.resize(n, 0);
+  slot_.resize(n, -1);
+  star_.resize(n);
+  if (++call_ == 0) {  // wrap-around: every stamp is stale
+    std::fill(slot_stamp_.begin(), slot_stamp_.end(), 0);
+    std::fill(star_stamp_.begin(), star_stamp_.end(), 0);
+    call_ = 1;
+  }
+}
+
 Eigen::Vector3d SurfaceSmoother::Position(VertexHandle v) const {
-  const auto it = moved_.find(v->info().index);
-  return it == moved_.end() ? ToEigen(v->point()) : it->second;
+  const size_t index = static_cast<size_t>(v->info().index);
+  return index < out_.size() ? out_[index] : ToEigen(v->point());
+}
+
+std::pair<uint32_t, uint32_t> SurfaceSmoother::StarFacets(const DelaunayMesh::Impl& t, int index) {
+  if (star_stamp_[index] == call_) return star_[index];
+  thread_local std::vector<CellHandle> star;
+  star.clear();
+  t.tri.incident_cells(t.vertices[index], std::back_inserter(star));
+  const uint32_t begin = static_cast<uint32_t>(facets_.size());
+  for (const CellHandle& c : star) {
+    if (!c->info().in_o) continue;  // cells of O are finite
+    for (int k = 0; k < 4; ++k) {
+      if (c->neighbor(k)->info().in_o) continue;
+      facets_.push_back({c->vertex((k + 1) & 3)->info().index, c->vertex((k + 2) & 3)->info().index,
+                         c->vertex((k + 3) & 3)->info().index});
+    }
+  }
+  star_stamp_[index] = call_;
+  return star_[index] = {begin, static_cast<uint32_t>(facets_.size())};
+}
+
+bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference) {
+  // The umbrella at the current positions and its bounding box: a triangle whose box misses it
+  // cannot meet it.
+  const Eigen::Vector3d& x = out_[local.index];
+  Eigen::AlignedBox3d umbrella_box(x);
+  for (uint32_t i = local.triangles_begin; i < local.triangles_end; ++i) {
+    umbrella_box.extend(out_[triangles_[i].a]);
+    umbrella_box.extend(out_[triangles_[i].b]);
+  }
+  const double pad =
+      1e-9 * (1.0 + umbrella_box.diagonal().norm() + umbrella_box.max().cwiseAbs().maxCoeff());
+  umbrella_box.extend(umbrella_box.max() + Eigen::Vector3d::Constant(pad));
+  umbrella_box.extend(umbrella_box.min() - Eigen::Vector3d::Constant(pad));
+
+  // The δO facets of the cells of O around v and its ring whose box meets the umbrella's, each
+  // once (a δO facet has one cell in O, so its vertices name it).
+  candidates_.clear();
+  auto consider = [&](const Facet& f) {
+    Eigen::AlignedBox3d box(out_[f[0]]);
+    box.extend(out_[f[1]]);
+    box.extend(out_[f[2]]);
+    if (!box.intersects(umbrella_box)) return;
+    Facet key = f;
+    if (key[0] > key[1]) std::swap(key[0], key[1]);
+    if (key[1] > key[2]) std::swap(key[1], key[2]);
+    if (key[0] > key[1]) std::swap(key[0], key[1]);
+    candidates_.push_back(key);
+  };
+  if (reference) {
+    // Gathered anew: the cells around v and its ring, then their δO facets.
+    thread_local std::vector<CellHandle> star, cells;
+    cells.clear();
+    auto add_star = [&](VertexHandle w) {
+      star.clear();
+      t.tri.incident_cells(w, std::back_inserter(star));
+      for (const CellHandle& c : star) {
+        if (c->info().in_o) cells.push_back(c);
+      }
+    };
+    add_star(local.v);
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) add_star(t.vertices[ring_[i]]);
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    for (const CellHandle& c : cells) {
+      for (int k = 0; k < 4; ++k) {
+        if (c->neighbor(k)->info().in_o) continue;
+        consider({c->vertex((k + 1) & 3)->info().index, c->vertex((k + 2) & 3)->info().index,
+                  c->vertex((k + 3) & 3)->info().index});
+      }
+    }
+  } else {
+    auto consider_star = [&](int index) {
+      const auto [begin, end] = StarFacets(t, index);
+      for (uint32_t i = begin; i < end; ++i) consider(facets_[i]);
+    };
+    consider_star(local.index);
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) consider_star(ring_[i]);
+  }
+  std::sort(candidates_.begin(), candidates_.end(), [](const Facet& a, const Facet& b) {
+    return a[0] != b[0] ? a[0] < b[0] : a[1] != b[1] ? a[1] < b[1] : a[2] < b[2];
+  });
+  candidates_.erase(std::unique(candidates_.begin(), candidates_.end()), candidates_.end());
+  if (candidates_.empty()) return false;
+
+  // The umbrella's triangles: vertices, CGAL points and boxes.
+  struct Mine {
+    int id[3];
+    Eigen::Vector3d x[3];
+    Point p[3];
+    Eigen::AlignedBox3d box;
+  };
+  thread_local std::vector<Mine> mine;
+  mine.clear();
+  for (uint32_t i = local.triangles_begin; i < local.triangles_end; ++i) {
+    const Triangle& tr = triangles_[i];
+    Mine m{{local.index, tr.a, tr.b},
+           {x, out_[tr.a], out_[tr.b]},
+           {ToCgal(x), ToCgal(out_[tr.a]), ToCgal(out_[tr.b])},
+           Eigen::AlignedBox3d(x)};
+    m.box.extend(out_[tr.a]);
+    m.box.extend(out_[tr.b]);
+    mine.push_back(m);
+  }
+  for (const Facet& f : candidates_) {
+    const Eigen::Vector3d e[3] = {out_[f[0]], out_[f[1]], out_[f[2]]};
+    Eigen::AlignedBox3d box(e[0]);
+    box.extend(e[1]);
+    box.extend(e[2]);
+    const Point q[3] = {ToCgal(e[0]), ToCgal(e[1]), ToCgal(e[2])};
+    const Kernel::Triangle_3 other_triangle(q[0], q[1], q[2]);
+    for (const Mine& m : mine) {
+      // Closed triangles that meet have meeting boxes (the same doubles): exact to skip.
+      if (!reference && !m.box.intersects(box)) continue;
+      int shared = 0, shared_mine = -1, shared_other = -1;
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+          if (m.id[i] == f[j]) ++shared, shared_mine = i, shared_other = j;
+        }
+      }
+      if (shared >= 2) continue;  // neighbours across an edge: the flip test's business
+      if (!reference) {
+        // Filter in doubles before the exact tests: a triangle or an edge certainly on one side
+        // of the other triangle's plane misses it.
+        const Eigen::Vector3d& m0 = m.x[0];
+        const Eigen::Vector3d& m1 = m.x[1];
+        const Eigen::Vector3d& m2 = m.x[2];
+        if (shared == 0) {
+          if (CertainlyAside(m0, m1, m2, {e[0], e[1], e[2]}) ||
+              CertainlyAside(e[0], e[1], e[2], {m0, m1, m2})) {
+            continue;
+          }
+        } else if (CertainlyAside(m0, m1, m2,
+                                  {e[(shared_other + 1) % 3], e[(shared_other + 2) % 3]}) &&
+                   CertainlyAside(e[0], e[1], e[2],
+                                  {m.x[(shared_mine + 1) % 3], m.x[(shared_mine + 2) % 3]})) {
+          continue;
+        }
+      }
+      const Kernel::Triangle_3 triangle(m.p[0], m.p[1], m.p[2]);
+      if (shared == 0) {
+        if (CGAL::do_intersect(triangle, other_triangle)) return true;
+        continue;
+      }
+      // One shared vertex: the far edge of each triangle must miss the other.
+      const Kernel::Segment_3 far_other(q[(shared_other + 1) % 3], q[(shared_other + 2) % 3]);
+      const Kernel::Segment_3 far_mine(m.p[(shared_mine + 1) % 3], m.p[(shared_mine + 2) % 3]);
+      if (CGAL::do_intersect(far_other, triangle) || CGAL::do_intersect(far_mine, other_triangle)) {
+        return true;
+      }
+    }
+  }
+  return false;
 }
 
 SmoothingResult SurfaceSmoother::Update(const DelaunayMesh::Impl& t,
@@ -109,6 +305,11 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
                                                 const Eigen::Vector3d& centre, double radius,
                                                 const SmoothingOptions& options) {
   SmoothingResult result;
+  Grow(t);
+  locals_.clear();
+  triangles_.clear();
+  ring_.clear();
+  facets_.clear();
   const double radius2 = radius * radius;
   auto in_ball = [&](VertexHandle v) {
     return (ToEigen(v->point()) - centre).squaredNorm() < radius2;
@@ -117,81 +318,95 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   std::sort(vertices.begin(), vertices.end(),
             [](VertexHandle a, VertexHandle b) { return a->info().index < b->info().index; });
 
-  std::unordered_map<int, Local> set;  // the vertices recomputed, by index
-  std::vector<int> order;              // their indices, in a reproducible order
-  std::vector<UmbrellaTriangle> umbrella;
-  std::vector<VertexHandle> changed_outside;  // umbrella changed, outside the ball
-  auto add = [&](VertexHandle v, std::vector<UmbrellaTriangle>* known) {
-    const int index = v->info().index;
-    if (set.count(index)) return;
-    Local& local = set[index];
+  // The vertices recomputed (locals_, their slot by index), in a reproducible order. A vertex
+  // in the set starts at its own point: out_ holds the current position of every vertex.
+  auto in_set = [&](int index) { return slot_stamp_[index] == call_; };
+  auto make_local = [&](VertexHandle v, const std::vector<UmbrellaTriangle>& umbrella,
+                        bool ring_of_a_only) {
+    Local local;
     local.v = v;
-    if (known) {
-      local.umbrella = *known;
-    } else {
-      UmbrellaOf(t.tri, v, local.umbrella);
+    local.index = v->info().index;
+    local.own = ToEigen(v->point());
+    local.previous = out_[local.index];
+    local.triangles_begin = static_cast<uint32_t>(triangles_.size());
+    for (const UmbrellaTriangle& tr : umbrella) {
+      const Eigen::Vector3d a0 = ToEigen(tr.a->point()), b0 = ToEigen(tr.b->point());
+      triangles_.push_back(
+          {tr.a->info().index, tr.b->info().index, (a0 - local.own).cross(b0 - local.own)});
     }
-    for (const UmbrellaTriangle& tr : local.umbrella) {
-      for (VertexHandle w : {tr.a, tr.b}) {
-        if (std::find(local.ring.begin(), local.ring.end(), w) == local.ring.end()) {
-          local.ring.push_back(w);
+    local.triangles_end = static_cast<uint32_t>(triangles_.size());
+    local.ring_begin = static_cast<uint32_t>(ring_.size());
+    for (const UmbrellaTriangle& tr : umbrella) {
+      for (int w : {tr.a->info().index, tr.b->info().index}) {
+        if (ring_of_a_only && w != tr.a->info().index) continue;
+        if (!ring_of_a_only &&
+            std::find(ring_.begin() + local.ring_begin, ring_.end(), w) != ring_.end()) {
+          continue;
         }
+        ring_.push_back(w);
       }
     }
-    local.own = ToEigen(v->point());
-    local.previous = Position(v);
-    local.x = local.own;
-    order.push_back(index);
+    local.ring_end = static_cast<uint32_t>(ring_.size());
+    locals_.push_back(local);
   };
-  std::vector<VertexHandle> changed;
+  std::vector<UmbrellaTriangle> umbrella;
+  auto add = [&](VertexHandle v, bool known) {
+    const int index = v->info().index;
+    if (in_set(index)) return;
+    if (!known) UmbrellaOf(t.tri, v, umbrella);
+    slot_stamp_[index] = call_;
+    slot_[index] = static_cast<int>(locals_.size());
+    make_local(v, umbrella, false);
+    out_[index] = locals_.back().own;
+  };
+  std::vector<VertexHandle> changed_outside;  // umbrella changed, outside the ball
+  std::vector<int> changed;                   // slots of the vertices whose umbrella changed
   for (const VertexHandle& v : vertices) {
     const int index = v->info().index;
     UmbrellaOf(t.tri, v, umbrella);
     if (umbrella.empty()) {
-      moved_.erase(index);
-      umbrella_.erase(index);
+      out_[index] = ToEigen(v->point());
+      moved_[index] = 0;
+      has_umbrella_[index] = 0;
       continue;
     }
     const uint64_t h = UmbrellaHash(umbrella);
-    auto it = umbrella_.find(index);
-    if (it != umbrella_.end() && it->second == h) continue;
+    if (has_umbrella_[index] && umbrella_[index] == h) continue;
+    has_umbrella_[index] = 1;
     umbrella_[index] = h;
     if (!in_ball(v)) {
-      if (moved_.count(index)) changed_outside.push_back(v);
+      if (moved_[index]) changed_outside.push_back(v);
       continue;
     }
-    changed.push_back(v);
-    add(v, &umbrella);
+    changed.push_back(static_cast<int>(locals_.size()));
+    add(v, true);
   }
-  for (const VertexHandle& v : changed) {
-    const std::vector<VertexHandle> ring = set[v->info().index].ring;
-    for (const VertexHandle& w : ring) {
-      if (in_ball(w)) add(w, nullptr);
+  for (int k : changed) {
+    for (uint32_t i = locals_[k].ring_begin; i < locals_[k].ring_end; ++i) {
+      const VertexHandle w = t.vertices[ring_[i]];
+      if (in_ball(w)) add(w, false);
     }
   }
-  result.vertices = order.size();
+  const size_t num_set = locals_.size();
+  result.vertices = num_set;
 
-  auto position = [&](VertexHandle w) -> Eigen::Vector3d {
-    const auto it = set.find(w->info().index);
-    return it == set.end() ? Position(w) : it->second.x;
-  };
   // Whether v at x leaves every triangle of its umbrella facing O and not degenerate.
   auto valid = [&](const Local& local, const Eigen::Vector3d& x) {
-    for (const UmbrellaTriangle& tr : local.umbrella) {
-      const Eigen::Vector3d a0 = ToEigen(tr.a->point()), b0 = ToEigen(tr.b->point());
-      const Eigen::Vector3d n0 = (a0 - local.own).cross(b0 - local.own);
-      const Eigen::Vector3d a = position(tr.a), b = position(tr.b);
+    for (uint32_t i = local.triangles_begin; i < local.triangles_end; ++i) {
+      const Triangle& tr = triangles_[i];
+      const Eigen::Vector3d& a = out_[tr.a];
+      const Eigen::Vector3d& b = out_[tr.b];
       const Eigen::Vector3d n = (a - x).cross(b - x);
-      if (!(n.dot(n0) > 0.0)) return false;
+      if (!(n.dot(tr.normal) > 0.0)) return false;
       const double longest =
           std::max({(a - x).squaredNorm(), (b - x).squaredNorm(), (b - a).squaredNorm()});
       if (n.norm() <= options.min_triangle_shape * longest) return false;
     }
     return true;
   };
-  auto try_move = [&](Local& local, const Eigen::Vector3d& x) {
+  auto try_move = [&](const Local& local, const Eigen::Vector3d& x) {
     if (valid(local, x)) {
-      local.x = x;
+      out_[local.index] = x;
     } else {
       ++result.rejected;
     }
@@ -199,21 +414,25 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
 
   // Peak removal: a vertex far out of the plane of its umbrella (Newell normal of its link
   // polygon through the centroid of its neighbours) goes to that centroid.
-  for (int index : order) {
-    Local& local = set[index];
-    if (local.ring.empty()) continue;
+  for (size_t k = 0; k < num_set; ++k) {
+    const Local& local = locals_[k];
+    if (local.ring_begin == local.ring_end) continue;
+    const double ring_size = static_cast<double>(local.ring_end - local.ring_begin);
+    const Eigen::Vector3d& x = out_[local.index];
     Eigen::Vector3d m = Eigen::Vector3d::Zero();
-    for (const VertexHandle& w : local.ring) m += position(w);
-    m /= static_cast<double>(local.ring.size());
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) m += out_[ring_[i]];
+    m /= ring_size;
     Eigen::Vector3d normal = Eigen::Vector3d::Zero();
     double edge = 0.0;
-    for (const UmbrellaTriangle& tr : local.umbrella) {
-      normal += (position(tr.a) - m).cross(position(tr.b) - m);
+    for (uint32_t i = local.triangles_begin; i < local.triangles_end; ++i) {
+      normal += (out_[triangles_[i].a] - m).cross(out_[triangles_[i].b] - m);
     }
-    for (const VertexHandle& w : local.ring) edge += (position(w) - local.x).norm();
-    edge /= static_cast<double>(local.ring.size());
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) {
+      edge += (out_[ring_[i]] - x).norm();
+    }
+    edge /= ring_size;
     if (normal.norm() == 0.0) continue;
-    const double height = std::abs((local.x - m).dot(normal.normalized()));
+    const double height = std::abs((x - m).dot(normal.normalized()));
     if (height > options.peak_factor * edge) try_move(local, m);
   }
   // Taubin λ|μ steps: Laplacians of the whole set, then moves one by one, each checked against
@@ -221,27 +440,31 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   // is taken along the umbrella normal only (no drift along the surface) and weighs each
   // neighbour by its height over the tangent plane (bilateral, Fleishman et al. 2003), so that
   // the neighbours across a crease (a wall meeting the ground) barely pull.
-  std::vector<Eigen::Vector3d> laplacian(order.size());
+  std::vector<Eigen::Vector3d> laplacian(num_set);
   const double cos_crease = std::cos(options.crease_angle_deg * M_PI / 180.0);
   auto normal_laplacian = [&](const Local& local) -> Eigen::Vector3d {
-    if (local.ring.empty()) return Eigen::Vector3d::Zero();
+    if (local.ring_begin == local.ring_end) return Eigen::Vector3d::Zero();
+    const Eigen::Vector3d& x = out_[local.index];
     Eigen::Vector3d normal = Eigen::Vector3d::Zero();
-    for (const UmbrellaTriangle& tr : local.umbrella) {
-      normal += (position(tr.a) - local.x).cross(position(tr.b) - local.x);
+    for (uint32_t i = local.triangles_begin; i < local.triangles_end; ++i) {
+      normal += (out_[triangles_[i].a] - x).cross(out_[triangles_[i].b] - x);
     }
     if (normal.norm() == 0.0) return Eigen::Vector3d::Zero();
     normal.normalize();
     // A crease or a corner (a triangle turned far from the umbrella normal) is a feature: kept.
-    for (const UmbrellaTriangle& tr : local.umbrella) {
-      const Eigen::Vector3d n = (position(tr.a) - local.x).cross(position(tr.b) - local.x);
+    for (uint32_t i = local.triangles_begin; i < local.triangles_end; ++i) {
+      const Eigen::Vector3d n = (out_[triangles_[i].a] - x).cross(out_[triangles_[i].b] - x);
       if (n.dot(normal) < cos_crease * n.norm()) return Eigen::Vector3d::Zero();
     }
     double edge = 0.0;
-    for (const VertexHandle& w : local.ring) edge += (position(w) - local.x).norm();
-    const double sigma = options.feature_sigma * edge / static_cast<double>(local.ring.size());
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) {
+      edge += (out_[ring_[i]] - x).norm();
+    }
+    const double sigma =
+        options.feature_sigma * edge / static_cast<double>(local.ring_end - local.ring_begin);
     double sum = 0.0, weights = 0.0;
-    for (const VertexHandle& w : local.ring) {
-      const double h = (position(w) - local.x).dot(normal);
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) {
+      const double h = (out_[ring_[i]] - x).dot(normal);
       const double weight = std::exp(-0.5 * h * h / (sigma * sigma));
       sum += weight * h;
       weights += weight;
@@ -250,121 +473,47 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   };
   for (int step = 0; step < 2 * options.taubin_steps; ++step) {
     const double factor = step % 2 == 0 ? options.lambda : options.mu;
-    for (size_t k = 0; k < order.size(); ++k) laplacian[k] = normal_laplacian(set[order[k]]);
-    for (size_t k = 0; k < order.size(); ++k) {
-      Local& local = set[order[k]];
-      try_move(local, local.x + factor * laplacian[k]);
+    for (size_t k = 0; k < num_set; ++k) laplacian[k] = normal_laplacian(locals_[k]);
+    for (size_t k = 0; k < num_set; ++k) {
+      const Local& local = locals_[k];
+      try_move(local, out_[local.index] + factor * laplacian[k]);
     }
   }
 
   // Local intersections: the triangles around each vertex that moved against the δO triangles
   // of the cells around it and its neighbours.
-  auto meets_nearby = [&](const Local& local) {
-    // The cells around v and its ring, each once (sorted handles), then their δO facets: each
-    // δO facet is seen once from its cell in O.
-    thread_local std::vector<CellHandle> star, cells;
-    cells.clear();
-    auto add_star = [&](VertexHandle w) {
-      star.clear();
-      t.tri.incident_cells(w, std::back_inserter(star));
-      for (const CellHandle& c : star) {
-        if (c->info().in_o) cells.push_back(c);
-      }
-    };
-    add_star(local.v);
-    for (const VertexHandle& w : local.ring) add_star(w);
-    std::sort(cells.begin(), cells.end());
-    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-    // The umbrella at the new positions and its bounding box: a triangle whose box misses it
-    // cannot meet it.
-    const Point x = ToCgal(local.x);
-    Eigen::AlignedBox3d umbrella_box(local.x);
-    for (const UmbrellaTriangle& tr : local.umbrella) {
-      umbrella_box.extend(position(tr.a));
-      umbrella_box.extend(position(tr.b));
-    }
-    const double pad =
-        1e-9 * (1.0 + umbrella_box.diagonal().norm() + umbrella_box.max().cwiseAbs().maxCoeff());
-    umbrella_box.extend(umbrella_box.max() + Eigen::Vector3d::Constant(pad));
-    umbrella_box.extend(umbrella_box.min() - Eigen::Vector3d::Constant(pad));
-    for (const CellHandle& c : cells) {
-      for (int k = 0; k < 4; ++k) {
-        if (c->neighbor(k)->info().in_o) continue;
-        const VertexHandle other[3] = {c->vertex((k + 1) & 3), c->vertex((k + 2) & 3),
-                                       c->vertex((k + 3) & 3)};
-        const Eigen::Vector3d e[3] = {position(other[0]), position(other[1]), position(other[2])};
-        Eigen::AlignedBox3d box(e[0]);
-        box.extend(e[1]);
-        box.extend(e[2]);
-        if (!box.intersects(umbrella_box)) continue;
-        const Point q[3] = {ToCgal(e[0]), ToCgal(e[1]), ToCgal(e[2])};
-        const Kernel::Triangle_3 other_triangle(q[0], q[1], q[2]);
-        for (const UmbrellaTriangle& tr : local.umbrella) {
-          const VertexHandle mine[3] = {local.v, tr.a, tr.b};
-          int shared = 0, shared_mine = -1, shared_other = -1;
-          for (int i = 0; i < 3; ++i) {
-            for (int j = 0; j < 3; ++j) {
-              if (mine[i] == other[j]) ++shared, shared_mine = i, shared_other = j;
-            }
-          }
-          if (shared >= 2) continue;  // neighbours across an edge: the flip test's business
-          const Point p[3] = {x, ToCgal(position(tr.a)), ToCgal(position(tr.b))};
-          const Kernel::Triangle_3 triangle(p[0], p[1], p[2]);
-          if (shared == 0) {
-            if (CGAL::do_intersect(triangle, other_triangle)) return true;
-            continue;
-          }
-          // One shared vertex: the far edge of each triangle must miss the other.
-          const Kernel::Segment_3 far_other(q[(shared_other + 1) % 3], q[(shared_other + 2) % 3]);
-          const Kernel::Segment_3 far_mine(p[(shared_mine + 1) % 3], p[(shared_mine + 2) % 3]);
-          if (CGAL::do_intersect(far_other, triangle) ||
-              CGAL::do_intersect(far_mine, other_triangle)) {
-            return true;
-          }
-        }
-      }
-    }
-    return false;
-  };
   std::vector<int> work;
-  for (int index : order) {
-    if (set[index].x != set[index].previous) work.push_back(index);
+  for (size_t k = 0; k < num_set; ++k) {
+    if (out_[locals_[k].index] != locals_[k].previous) work.push_back(static_cast<int>(k));
   }
   for (const VertexHandle& v : changed_outside) {
     // Outside the ball a vertex keeps its position, unless its new umbrella meets something
     // there (then it goes back to its own point, like a vertex new to δO).
-    const int index = v->info().index;
-    Local local;
-    local.v = v;
-    UmbrellaOf(t.tri, v, local.umbrella);
-    for (const UmbrellaTriangle& tr : local.umbrella) local.ring.push_back(tr.a);
-    local.own = ToEigen(v->point());
-    local.x = Position(v);
-    if (!valid(local, local.x) || meets_nearby(local)) {
-      moved_.erase(index);
+    UmbrellaOf(t.tri, v, umbrella);
+    make_local(v, umbrella, /*ring_of_a_only=*/true);
+    const Local& local = locals_.back();
+    if (!valid(local, out_[local.index]) || MeetsNearby(t, local, options.reference_checks)) {
+      out_[local.index] = local.own;
+      moved_[local.index] = 0;
       ++result.rejected;
     }
   }
   while (!work.empty()) {
-    const int index = work.back();
+    const int k = work.back();
     work.pop_back();
-    Local& local = set[index];
-    if (local.reverts >= 2 || !meets_nearby(local)) continue;
+    Local& local = locals_[k];
+    if (local.reverts >= 2 || !MeetsNearby(t, local, options.reference_checks)) continue;
     ++result.rejected;
-    local.x = ++local.reverts == 1 ? local.previous : local.own;
-    work.push_back(index);
-    for (const VertexHandle& w : local.ring) {
-      if (set.count(w->info().index)) work.push_back(w->info().index);
+    out_[local.index] = ++local.reverts == 1 ? local.previous : local.own;
+    work.push_back(k);
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) {
+      if (in_set(ring_[i])) work.push_back(slot_[ring_[i]]);
     }
   }
 
-  for (int index : order) {
-    const Local& local = set[index];
-    if (local.x == local.own) {
-      moved_.erase(index);
-    } else {
-      moved_[index] = local.x;
-    }
+  for (size_t k = 0; k < num_set; ++k) {
+    const Local& local = locals_[k];
+    moved_[local.index] = out_[local.index] != local.own ? 1 : 0;
   }
   return result;
 }

@@ -4,9 +4,11 @@
 // the sculptor after step 5 on the cells where O may have changed in the keyframe.
 
 #include <Eigen/Core>
+#include <array>
+#include <cstdint>
 #include <functional>
 #include <limits>
-#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "calib/ply.h"
@@ -51,8 +53,46 @@ class SurfaceSmoother {
   Eigen::Vector3d Position(VertexHandle v) const;
 
  private:
-  std::unordered_map<int, Eigen::Vector3d> moved_;  // by vertex index, when not at its point
-  std::unordered_map<int, uint64_t> umbrella_;      // by vertex index: hash of its δO umbrella
+  // A δO triangle (v, a, b) of the umbrella of a recomputed vertex v, counter-clockwise seen
+  // from O, by vertex index, with its normal at the Delaunay positions.
+  struct Triangle {
+    int a, b;
+    Eigen::Vector3d normal;
+  };
+  // A vertex recomputed in the current call; its umbrella and ring (distinct δO neighbours)
+  // are ranges of triangles_ and ring_.
+  struct Local {
+    VertexHandle v;
+    int index = -1;
+    Eigen::Vector3d own, previous;
+    uint32_t triangles_begin = 0, triangles_end = 0, ring_begin = 0, ring_end = 0;
+    int reverts = 0;
+  };
+  using Facet = std::array<int, 3>;  // a δO triangle by vertex index
+
+  void Grow(const DelaunayMesh::Impl& t);
+  // The δO facets of the cells of O around vertex `index`, gathered once per call.
+  std::pair<uint32_t, uint32_t> StarFacets(const DelaunayMesh::Impl& t, int index);
+  // Whether the umbrella of `local` at the current positions meets a δO triangle of the cells
+  // of O around the vertex or its ring (the vertex's triangles against the others).
+  bool MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference);
+
+  // By vertex index: the output position (its point when not smoothed), whether it differs
+  // from the point, and the hash of the δO umbrella (when has_umbrella_).
+  std::vector<Eigen::Vector3d> out_;
+  std::vector<uint8_t> moved_, has_umbrella_;
+  std::vector<uint64_t> umbrella_;
+  // Scratch of one call, kept for its capacity: the recomputed vertices (slot_ by vertex index,
+  // valid when slot_stamp_ equals call_), their umbrellas and rings, and the δO facets around
+  // the vertices met (star_ by vertex index, valid when star_stamp_ equals call_).
+  uint32_t call_ = 0;
+  std::vector<uint32_t> slot_stamp_, star_stamp_;
+  std::vector<int> slot_;
+  std::vector<std::pair<uint32_t, uint32_t>> star_;
+  std::vector<Local> locals_;
+  std::vector<Triangle> triangles_;
+  std::vector<int> ring_;
+  std::vector<Facet> facets_, candidates_;
 };
 
 }  // namespace omni::internal

@@ -164,5 +164,52 @@ TEST(GenusRefinement, StreetStaysManifoldAfterEveryKeyframe) {
   std::cout << "street: " << groups << " groups added by the genus refinement\n";
 }
 
+// The shortcuts of the refinement (memo of the groups that failed since O last changed, the
+// vertex that failed last tested first) against the reference: after every keyframe of a noisy
+// street, the same δO and the same counts.
+TEST(GenusRefinement, ShortcutsMatchTheReference) {
+  const auto drive = testing::NoisyStreet(24, 100, 0.08, 21);
+  SculptorOptions fast;
+  fast.scale = 1.0;
+  fast.smoothing.enabled = false;
+  SculptorOptions reference = fast;
+  reference.genus.reference = true;
+  IncrementalSculptor a(fast), b(reference);
+  size_t groups = 0;
+  for (const SurfaceKeyframe& kf : drive) {
+    const std::vector<KeyframeStats> sa = a.AddKeyframe(kf), sb = b.AddKeyframe(kf);
+    ASSERT_EQ(sa.size(), sb.size());
+    for (size_t i = 0; i < sa.size(); ++i) {
+      EXPECT_EQ(sa[i].genus_groups, sb[i].genus_groups);
+      EXPECT_EQ(sa[i].genus_euler_change, sb[i].genus_euler_change);
+      EXPECT_EQ(sa[i].genus_free_after, sb[i].genus_free_after);
+      groups += sa[i].genus_groups;
+    }
+    const TriangleMesh ma = a.ExtractMesh(), mb = b.ExtractMesh();
+    ASSERT_EQ(ma.triangles, mb.triangles) << "keyframe " << kf.id.value;
+    ASSERT_EQ(ma.vertices, mb.vertices) << "keyframe " << kf.id.value;
+  }
+  EXPECT_GT(groups, 0u);  // the comparison is not vacuous
+}
+
+TEST(GenusRefinement, ShortcutsMatchTheReferenceOnTunnels) {
+  size_t groups = 0;
+  for (uint32_t seed : {7u, 8u, 9u, 10u}) {
+    for (int max_group_cells : {4, 8, 64}) {
+      Tunnel fast = MakeTunnel(seed), reference = MakeTunnel(seed);
+      GenusRefinementOptions options;
+      options.max_group_cells = max_group_cells;
+      const GenusRefinementStats a = RefineGenus(fast.mesh, options);
+      options.reference = true;
+      const GenusRefinementStats b = RefineGenus(reference.mesh, options);
+      EXPECT_EQ(a.groups, b.groups) << "seed " << seed << " groups of " << max_group_cells;
+      EXPECT_EQ(a.euler_change, b.euler_change);
+      EXPECT_EQ(fast.mesh.ExtractSurface().triangles, reference.mesh.ExtractSurface().triangles);
+      groups += a.groups;
+    }
+  }
+  EXPECT_GT(groups, 0u);
+}
+
 }  // namespace
 }  // namespace omni

@@ -195,6 +195,69 @@ TEST(Smoothing, MovesNoVertexOutsideTheKeyframeBall) {
   EXPECT_GT(surface_outside, 1000u);
 }
 
+// The fast local intersection checks (δO triangles around each vertex gathered once per keyframe,
+// a box filter per triangle pair) against the reference (gathered anew for every check, no
+// filter): after every keyframe, the same smoothed position for every vertex and the same
+// counts; and after every keyframe no two triangles of the smoothed surface intersect (brute
+// force over all pairs whose boxes meet). (Flips are checked at the end of the runs above: a
+// vertex sent back to its previous position by the intersection checks is not flip-checked, and
+// a triangle can stay turned for some keyframes.)
+void ExpectFastChecksMatchReference(const std::vector<SurfaceKeyframe>& drive, double radius) {
+  SculptorOptions fast;
+  fast.scale = 1.0;
+  fast.steiner_step_factor = 4.0;
+  fast.max_ray_length_factor = radius;
+  SculptorOptions reference = fast;
+  reference.smoothing.reference_checks = true;
+  IncrementalSculptor a(fast), b(reference);
+  size_t keyframes = 0, moved = 0, rejected = 0;
+  for (const SurfaceKeyframe& kf : drive) {
+    const std::vector<KeyframeStats> sa = a.AddKeyframe(kf), sb = b.AddKeyframe(kf);
+    ASSERT_EQ(sa.size(), sb.size());
+    for (size_t i = 0; i < sa.size(); ++i) {
+      EXPECT_EQ(sa[i].smoothed_vertices, sb[i].smoothed_vertices);
+      EXPECT_EQ(sa[i].smoothing_rejected, sb[i].smoothing_rejected);
+      rejected += sa[i].smoothing_rejected;
+    }
+    if (sa.empty()) continue;
+    ++keyframes;
+    const DelaunayMesh& t = a.triangulation();
+    ASSERT_EQ(t.NumVertices(), b.triangulation().NumVertices());
+    double worst = 0.0;
+    for (size_t i = 0; i < t.NumVertices(); ++i) {
+      const Eigen::Vector3d p = a.SurfacePosition(static_cast<int>(i));
+      worst = std::max(worst, (p - b.SurfacePosition(static_cast<int>(i))).norm());
+      moved += p != t.Position(static_cast<int>(i)) ? 1 : 0;
+    }
+    EXPECT_LE(worst, 1e-9) << "keyframe " << kf.id.value;
+    SCOPED_TRACE("keyframe " + std::to_string(kf.id.value));
+    const TriangleMesh smoothed = a.ExtractMesh();
+    ASSERT_EQ(smoothed.triangles, t.ExtractSurface().triangles);
+    EXPECT_EQ(CountIntersectingPairs(smoothed), 0u);
+    EXPECT_TRUE(CheckManifold(smoothed).IsOrientedManifold());
+    if (::testing::Test::HasFailure()) return;
+  }
+  EXPECT_GT(keyframes, 5u);
+  EXPECT_GT(moved, 1000u);  // the comparison is not vacuous
+  EXPECT_GT(rejected, 0u);  // nor are the intersection checks
+}
+
+TEST(Smoothing, FastChecksMatchTheReferenceOnANoisyStreet) {
+  ExpectFastChecksMatchReference(testing::NoisyStreet(24, 80, 0.08, 11), 12.0);
+}
+
+TEST(Smoothing, FastChecksMatchTheReferenceInANoisySphere) {
+  ExpectFastChecksMatchReference(testing::NoisySphere(12, 120, 8.0, 0.08, 13), 12.0);
+}
+
+// Same input, same output: two runs give bit-identical smoothed surfaces.
+TEST(Smoothing, IsDeterministic) {
+  const auto drive = testing::NoisyStreet(20, 80, 0.05, 17);
+  const SculptRun first = Sculpt(drive, true), second = Sculpt(drive, true);
+  EXPECT_EQ(first.smoothed.triangles, second.smoothed.triangles);
+  EXPECT_EQ(first.smoothed.vertices, second.smoothed.vertices);
+}
+
 TEST(SmoothingOptions, CheckRejectsBadValues) {
   SmoothingOptions o;
   EXPECT_EQ(o.Check(), "");

@@ -172,7 +172,9 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       "Output folder (surface.ply, points.ply, poses.tum with --from-gt, stats/keyframes.csv)");
   command
       ->add_option("--enclosing", o->enclosing,
-                   "Enclosing set E: ball (paper §4.1) | conflict (conflict zones + margin)")
+                   "Enclosing set E: ball (paper §4.1; the default, its surface error is still "
+                   "slightly lower) | conflict (conflict zones + margin, widened by vertex "
+                   "stars: faster shrink and growth)")
       ->capture_default_str();
   command
       ->add_option("--enclosing-margin", o->sculptor.enclosing_margin,
@@ -183,6 +185,24 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                    "conflict E: rounds of widening where O still meets a conflict zone after "
                    "the shrink (0: the fixed margin only)")
       ->capture_default_str();
+  command
+      ->add_option("--enclosing-star-rings", o->sculptor.enclosing_star_rings,
+                   "conflict E: a widening round adds the cells of O around the vertices of "
+                   "the cells still in a conflict zone, this many vertex rings (+1 per round)")
+      ->capture_default_str();
+  command->add_flag_callback(
+      "--ring-widening", [o] { o->sculptor.enclosing_widening = EnclosingWidening::kRings; },
+      "conflict E: widen by facet rings through O (enclosing_round_rings · 2^k) instead of the "
+      "vertex stars");
+  command
+      ->add_option("--grow-closure-rounds", o->sculptor.grow_closure_rounds,
+                   "conflict E: rounds of growth over the free cells around the vertices whose "
+                   "surface changed in the keyframe (0: E, N and the new rays' cells only)")
+      ->capture_default_str();
+  command->add_flag_callback(
+      "--untargeted-shrink", [o] { o->sculptor.targeted_shrink = false; },
+      "conflict E: the several-at-once shrink tries the vertices of all of O ∩ E, not only "
+      "those of the cells of O in a conflict zone");
   command
       ->add_option("--ray-grid-step", o->sculptor.ray_grid_step_factor,
                    "Voxel side of the grid of old rays (paper §4.4), in units of s")

@@ -77,7 +77,9 @@ def main():
         print(f"  mean per keyframe: widening rounds {statistics.mean(f(r, 'enclose_rounds') for r in inc):.2f}, "
               f"cells added to E {statistics.mean(f(r, 'cells_e_added') for r in inc):.0f}, "
               f"active cells {statistics.mean(f(r, 'cells_active') for r in inc):.0f}, "
-              f"smoothing candidates {statistics.mean(f(r, 'smoothing_candidates') for r in inc):.0f}")
+              f"smoothing candidates {statistics.mean(f(r, 'smoothing_candidates') for r in inc):.0f}"
+              + (f", free cells grown around changes {statistics.mean(f(r, 'cells_grow_extra') for r in inc):.0f}"
+                 if "cells_grow_extra" in inc[0] else ""))
 
 
 if __name__ == "__main__":

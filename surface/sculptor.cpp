@@ -44,6 +44,8 @@ std::string SculptorOptions::Check() const {
   if (enclosing_margin < 0) return "enclosing_margin must be >= 0";
   if (enclosing_rounds < 0) return "enclosing_rounds must be >= 0";
   if (enclosing_round_rings < 1) return "enclosing_round_rings must be >= 1";
+  if (enclosing_star_rings < 1) return "enclosing_star_rings must be >= 1";
+  if (grow_closure_rounds < 0) return "grow_closure_rounds must be >= 0";
   if (!(ray_grid_step_factor > 0.0)) return "ray_grid_step_factor must be > 0";
   for (const std::string& problem : {genus.Check(), smoothing.Check()}) {
     if (!problem.empty()) return problem;
@@ -59,7 +61,7 @@ std::string KeyframeStatsCsvHeader() {
          "smoothed_vertices,smoothing_rejected,ms_genus,ms_smooth,rays_old_candidates,"
          "old_walk_cells,ms_rays_select,ms_rays_old,points_invalid,points_filtered_ground,"
          "points_filtered_length,points_filtered_aperture,enclose_rounds,cells_e_added,"
-         "cells_active,smoothing_candidates";
+         "cells_active,smoothing_candidates,cells_grow_extra";
 }
 
 std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
@@ -76,7 +78,8 @@ std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
     << s.rays_old_candidates << ',' << s.old_walk_cells << ',' << s.ms_rays_select << ','
     << s.ms_rays_old << ',' << s.points_invalid << ',' << s.points_filtered_ground << ','
     << s.points_filtered_length << ',' << s.points_filtered_aperture << ',' << s.enclose_rounds
-    << ',' << s.cells_e_added << ',' << s.cells_active << ',' << s.smoothing_candidates;
+    << ',' << s.cells_e_added << ',' << s.cells_active << ',' << s.smoothing_candidates << ','
+    << s.cells_grow_extra;
   return o.str();
 }
 
@@ -396,6 +399,41 @@ struct IncrementalSculptor::Impl {
     return added;
   }
 
+  // kConflictZones, EnclosingWidening::kVertexStars: the cells of O incident to the vertices of
+  // the cells of O left in D by the shrink join E (e_stamp), then, `vertex_rings` − 1 times,
+  // those incident to the vertices of the cells added. A cell of O ∩ D that the shrink keeps has
+  // all four vertices on δO and the star of one of them leaves E: the several-at-once shrink
+  // (§4.7) can only clear such a vertex when its whole star of O is in E. Returns the cells added.
+  std::vector<CellHandle> WidenByStars(const std::vector<CellHandle>& e_cells, int vertex_rings) {
+    std::vector<CellHandle> added, star;
+    std::vector<VertexHandle> frontier;
+    for (const CellHandle& c : e_cells) {
+      if (!(c->info().in_o && c->info().d_stamp == stamp)) continue;
+      for (int i = 0; i < 4; ++i) frontier.push_back(c->vertex(i));
+    }
+    std::unordered_set<const void*> seen;
+    std::vector<VertexHandle> next;
+    for (int ring = 0; ring < vertex_rings && !frontier.empty(); ++ring) {
+      next.clear();
+      for (const VertexHandle& v : frontier) {
+        if (t.tri.is_infinite(v) || !seen.insert(&*v).second) continue;
+        star.clear();
+        t.tri.incident_cells(v, std::back_inserter(star));
+        for (const CellHandle& c : star) {
+          if (!c->info().in_o) continue;
+          if (ring + 1 < vertex_rings) {
+            for (int k = 0; k < 4; ++k) next.push_back(c->vertex(k));
+          }
+          if (c->info().e_stamp == stamp) continue;
+          c->info().e_stamp = stamp;
+          added.push_back(c);
+        }
+      }
+      frontier.swap(next);
+    }
+    return added;
+  }
+
   // The cells where O may grow in this keyframe: E (what survived of it), N and the cells
   // crossed by new rays, found by a search from N and from the surviving cells of `seeds`.
   std::vector<CellHandle> ActiveCells(const std::vector<CellHandle>& n_cells,
@@ -424,6 +462,35 @@ struct IncrementalSculptor::Impl {
       }
     }
     return active;
+  }
+
+  // kConflictZones: the growth region E ∪ N ∪ (cells crossed by new rays) holds every cell whose
+  // counter changed, but a cell of F \ O outside it that the addition test refused earlier can
+  // pass once O changed around its vertices (the ball mode retries it in every keyframe whose
+  // ball holds it). So the cells of F \ O in the stars of the vertices whose umbrella changed in
+  // this keyframe (the shrink and the growth, recorded by SetInO in `touched`) join the region
+  // (e_stamp) and grow, as long as that makes new changes (at most grow_closure_rounds times).
+  // Appends them to `active` (step 6 works on them too).
+  void GrowAroundChanges(std::vector<CellHandle>& active, KeyframeStats& st) {
+    std::vector<CellHandle> star, extra;
+    size_t scanned = 0;
+    for (int round = 0; round < options.grow_closure_rounds; ++round) {
+      extra.clear();
+      for (; scanned < touched.size(); ++scanned) {
+        star.clear();
+        t.tri.incident_cells(touched[scanned], std::back_inserter(star));
+        for (const CellHandle& c : star) {
+          const internal::CellInfo& i = c->info();
+          if (i.in_o || i.counter == 0 || Active(c)) continue;
+          c->info().e_stamp = stamp;
+          extra.push_back(c);
+        }
+      }
+      if (extra.empty()) break;
+      st.cells_grow_extra += extra.size();
+      active.insert(active.end(), extra.begin(), extra.end());
+      Grow(extra);
+    }
   }
 
   // ---- Shrinking (§4.2, §4.7) ----
@@ -467,13 +534,15 @@ struct IncrementalSculptor::Impl {
     return true;
   }
 
-  void Shrink(const std::vector<CellHandle>& e_cells) {
+  // only_d: the several-at-once passes try only the vertices of the cells of O in a conflict
+  // zone D (kConflictZones needs O ∩ D = ∅, not O ∩ E = ∅; E is where cells may leave O).
+  void Shrink(const std::vector<CellHandle>& e_cells, bool only_d = false) {
     ShrinkOneAtOnce(e_cells);
     std::vector<CellHandle> star;
     for (int pass = 0; pass < options.max_vertex_passes; ++pass) {
       std::vector<CellHandle> left;
       for (const CellHandle& c : e_cells) {
-        if (c->info().in_o) left.push_back(c);
+        if (c->info().in_o && (!only_d || c->info().d_stamp == stamp)) left.push_back(c);
       }
       if (left.empty()) return;
       bool progress = false;
@@ -780,7 +849,9 @@ struct IncrementalSculptor::Impl {
     // shrink again.
     tick = Clock::now();
     std::vector<CellHandle> e_all = e_cells;
-    Shrink(e_all);
+    const bool only_d =
+        options.enclosing == EnclosingMode::kConflictZones && options.targeted_shrink;
+    Shrink(e_all, only_d);
     if (options.enclosing == EnclosingMode::kConflictZones) {
       // D is computed in T before any insertion, so it over-covers the zones met at insertion
       // time (an insertion removes cells that later points conflicted with), and a round may
@@ -796,15 +867,21 @@ struct IncrementalSculptor::Impl {
       for (int round = 0; round < options.enclosing_rounds && left > 0; ++round) {
         // The first rings may all be in E already (the margin): then the next round reaches
         // farther.
-        const std::vector<CellHandle> added = WidenEnclosing(
-            e_all, options.enclosing_margin + (options.enclosing_round_rings << round));
+        const std::vector<CellHandle> added =
+            options.enclosing_widening == EnclosingWidening::kVertexStars
+                ? WidenByStars(e_all, options.enclosing_star_rings + round)
+                : WidenEnclosing(
+                      e_all, options.enclosing_margin + (options.enclosing_round_rings << round));
         ++st.enclose_rounds;
         if (added.empty()) continue;
         st.cells_e_added += added.size();
         e_all.insert(e_all.end(), added.begin(), added.end());
-        Shrink(e_all);
+        Shrink(e_all, only_d);
         left = o_in_d();
       }
+      // The targeted passes may leave O in D where clearing other vertices of E first would
+      // unblock it: a last shrink over the vertices of all of O ∩ E before points are rejected.
+      if (only_d && left > 0 && options.enclosing_rounds > 0) Shrink(e_all, false);
     }
     for (const CellHandle& c : e_all) st.o_left_in_e += c->info().in_o ? 1 : 0;
     st.cells_e = e_all.size();
@@ -856,9 +933,10 @@ struct IncrementalSculptor::Impl {
     // Step 5: grow O in F, within E (recomputed: insertion replaced cells) and N.
     tick = Clock::now();
     if (options.enclosing == EnclosingMode::kBall) surviving = CellsInBall(kf.centre, r + l);
-    const std::vector<CellHandle> active = ActiveCells(n_cells, surviving);
-    st.cells_active = active.size();
+    std::vector<CellHandle> active = ActiveCells(n_cells, surviving);
     Grow(active);
+    if (options.enclosing == EnclosingMode::kConflictZones) GrowAroundChanges(active, st);
+    st.cells_active = active.size();
     st.ms_grow = MsSince(tick);
 
     // Step 6 on the δO vertices whose umbrella may have changed: those of the cells that
@@ -996,7 +1074,7 @@ std::vector<KeyframeStats> IncrementalSculptor::AddKeyframe(const SurfaceKeyfram
   Impl& m = *impl_;
   if (m.s > 0.0) return {m.Incremental(keyframe)};
   m.buffered.push_back(keyframe);
-  const bool known = m.options.scale > 0.0;
+  const bool known = m.options.scale > 0.0 && !m.options.batch_with_known_scale;
   if (static_cast<int>(m.buffered.size()) >= m.options.init_keyframes || known) {
     return m.ProcessBuffered();
   }

@@ -98,6 +98,14 @@ enum class OldRayTracing {
                  // of N and from each clean crossing of N's border (whole walk otherwise)
 };
 
+// How kConflictZones widens E where the shrink left cells of O in D (SculptorOptions).
+enum class EnclosingWidening {
+  kRings,        // the cells of O within enclosing_margin + enclosing_round_rings · 2^k facet
+                 // steps through O of those cells (round k = 0, 1, ...)
+  kVertexStars,  // the cells of O incident to their vertices, then to the vertices of the cells
+                 // added, k + 1 vertex rings in round k: what the several-at-once shrink needs
+};
+
 struct SculptorOptions {
   // s, the mean distance between consecutive keyframe centres; 0: measured on the first
   // init_keyframes keyframes (paper §5.1).
@@ -117,15 +125,27 @@ struct SculptorOptions {
   // (paper §5.1: T_40, F_40, O_40), otherwise one by one like the others.
   int init_keyframes = 40;
   bool batch_init = true;
+  // With a known scale, still buffer the first init_keyframes keyframes and sculpt them in one
+  // batch (with batch_init): the re-sculpt of a map corrected by a loop closure keeps the first
+  // sculpting's s (apps/pipeline/). Otherwise a known scale sculpts each keyframe as it comes.
+  bool batch_with_known_scale = false;
   EnclosingMode enclosing = EnclosingMode::kBall;
   int enclosing_margin = 2;  // kConflictZones: rings of neighbouring cells added around D
-  // kConflictZones: where the shrink left cells of O in D (it is blocked by the manifold tests,
-  // e.g. when emptying D needs a genus change of δO), E is widened by the cells of O within
-  // enclosing_margin + enclosing_round_rings · 2^k steps through O of those cells (k = 0, 1, ...)
-  // and O shrunk again, at most enclosing_rounds times; the points whose conflict zone still meets
-  // O are then rejected (§4.3).
+  // kConflictZones: where the shrink left cells of O in D (it is blocked by the manifold tests:
+  // such a cell has all four vertices on δO and the star of one of them leaves E), E is widened
+  // (enclosing_widening) and O shrunk again, at most enclosing_rounds times; the points whose
+  // conflict zone still meets O are then rejected (§4.3).
   int enclosing_rounds = 4;
   int enclosing_round_rings = 2;
+  EnclosingWidening enclosing_widening = EnclosingWidening::kVertexStars;
+  int enclosing_star_rings = 1;  // kVertexStars: vertex rings of the first round (+1 per round)
+  // kConflictZones: after the growth, the cells of F \ O around the vertices whose δO umbrella
+  // changed in the keyframe are grown too, repeated while it changes O, at most this many times
+  // (0: the growth region is E ∪ N ∪ the cells crossed by new rays only).
+  int grow_closure_rounds = 8;
+  // kConflictZones: the several-at-once shrink (§4.7) tries only the vertices of the cells of O
+  // in D (what must leave O before the insertions), not those of all of O ∩ E.
+  bool targeted_shrink = true;
   // Re-tracing of the old rays over the new cells N (§4.4); every mode gives the same counters.
   OldRayTracing old_rays = OldRayTracing::kNewCellRuns;
   // Voxel side of the grid that holds the old rays and the border of N, in units of s.
@@ -183,6 +203,9 @@ struct KeyframeStats {
          points_filtered_aperture = 0;
   // kConflictZones: widening rounds of E done after the first shrink, and the cells they added.
   size_t enclose_rounds = 0, cells_e_added = 0;
+  // kConflictZones: cells of F \ O added to the growth region around the changes of δO
+  // (SculptorOptions::grow_closure_rounds).
+  size_t cells_grow_extra = 0;
   // Step 6 work: the cells given to the genus refinement, the δO vertices examined by the
   // smoothing (those whose umbrella may have changed).
   size_t cells_active = 0, smoothing_candidates = 0;

@@ -59,7 +59,8 @@ const char* const kColumns =
     "genus_free_before,genus_free_after,genus_groups,genus_euler_change,smoothed_vertices,"
     "smoothing_rejected,ms_genus,ms_smooth,rays_old_candidates,old_walk_cells,ms_rays_select,"
     "ms_rays_old,points_invalid,points_filtered_ground,points_filtered_length,"
-    "points_filtered_aperture,enclose_rounds,cells_e_added,cells_active,smoothing_candidates";
+    "points_filtered_aperture,enclose_rounds,cells_e_added,cells_active,smoothing_candidates,"
+    "cells_grow_extra";
 
 TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPerKeyframe) {
   const fs::path drive = dir_->path() / "drive";

@@ -2,9 +2,10 @@
 // Place recognition for loop closure (DESIGN.md §6, issue 9), first part: a compact appearance
 // descriptor per keyframe (a small zero-mean, unit-norm thumbnail per camera) and a search
 // among keyframes far enough back in time. For a ring of side cameras a rotation of the
-// vehicle is a cyclic shift of the cameras, so every shift of the ring is scored. Not yet here:
-// the geometric verification (relative pose in RANSAC on matched bearings) and the correction
-// (sfm/pose_graph.h, then global adjustment).
+// vehicle is a cyclic shift of the cameras, so every shift of the ring is scored. Then the
+// geometric verification of a candidate (VerifyLoop: a relative pose of the rig in RANSAC on the
+// matched bearings, and a 3-D similarity of the matched map points, which must agree) and the
+// correction (sfm/pose_graph.h, then a global bundle adjustment).
 
 #include <opencv2/core.hpp>
 #include <string>
@@ -13,6 +14,8 @@
 #include "calib/pose.h"
 #include "calib/rig.h"
 #include "sfm/pose_graph.h"
+#include "sfm/relative_pose_central.h"
+#include "sfm/relative_pose_noncentral.h"
 #include "sfm/track_builder.h"
 #include "sfm/tracker.h"
 
@@ -31,7 +34,8 @@ struct LoopDetectionOptions {
 };
 
 struct PlaceDescriptor {
-  std::vector<std::vector<float>> cameras;  // one unit-norm, zero-mean thumbnail per camera
+  // One unit-norm, zero-mean thumbnail per camera of the ring (empty for the others).
+  std::vector<std::vector<float>> cameras;
 };
 
 struct LoopCandidate {
@@ -52,6 +56,9 @@ class LoopDetector {
   // The best keyframe at least min_keyframe_gap before `before` (exclusive) over every ring
   // shift, or keyframe −1 when none scores min_score.
   LoopCandidate Query(const PlaceDescriptor& query, int before) const;
+  // The best `count` keyframes (each with its best shift) scoring at least min_score, best
+  // first. One matrix product over all stored thumbnails: linear in the keyframes.
+  std::vector<LoopCandidate> QueryBest(const PlaceDescriptor& query, int before, int count) const;
   double Score(const PlaceDescriptor& query, const PlaceDescriptor& candidate, int shift) const;
   int size() const { return static_cast<int>(descriptors_.size()); }
 
@@ -59,21 +66,55 @@ class LoopDetector {
   LoopDetectionOptions options_;
   std::vector<int> ring_;
   std::vector<PlaceDescriptor> descriptors_;
+  // The ring thumbnails of every keyframe, one row per (keyframe, ring position).
+  std::vector<float> ring_rows_;
 };
+
+// The ring shift a rotation of the rig implies: for each ring camera i of the revisit, the ring
+// camera of the place seen before whose optical axis its axis comes closest to once rotated by
+// then_from_now; the most frequent i+shift. −1 without a ring of at least 3 cameras.
+int RingShiftOfRotation(const Rig& rig, const std::vector<int>& ring,
+                        const Eigen::Quaterniond& then_from_now);
 
 struct LoopClosureOptions {
   LoopDetectionOptions detection;
-  ZnccOptions matching;             // between the revisit's and the candidate's images
+  // Between the revisit's and the candidate's corners, all against all (one matrix product of
+  // their normalised windows per camera pair): half_window, min_zncc, max_distance_ratio and
+  // mutual apply; the matches keep the detected corners (no subpixel refinement).
+  ZnccOptions matching;
   double prepared_downscale = 2.0;  // images kept per keyframe for matching, shrunk by this
   int ransac_iterations = 300;
   // Inlier of the similarity: ‖S p_new − p_old‖ below this share of the median depth of the
   // candidate's points.
   double inlier_depth_share = 0.03;
   int min_inliers = 20;
+  int max_candidates = 2;  // verified per keyframe, best appearance first
+  // Geometric verification by the relative pose of the rig from the matched bearings (all the
+  // 2-D matches, with or without a map point). kFollowRig: central when Rig::central. Central:
+  // the ring's bearings rotated into the rig frame, one camera at the rig centre (the tracker's
+  // central approximation), five-point solver; the generalised solvers are degenerate for a
+  // rig whose camera offsets are small against the depths (Ladybug: 4 cm). Generalised: the
+  // rig's cam_from_rig offsets (sfm/relative_pose_noncentral.h).
+  enum class RelativePoseModel { kFollowRig, kCentral, kGeneralized };
+  RelativePoseModel relative_pose_model = RelativePoseModel::kFollowRig;
+  CentralRelativePoseOptions central_relative_pose = DefaultCentralRelativePose();
+  NoncentralRelativePoseOptions generalized_relative_pose = DefaultGeneralizedRelativePose();
+  int min_relative_inliers = 20;  // inliers of the relative pose
+  // Inliers over the 2-D matches. The paper drive's true loop: 0.78; look-alike places of its
+  // repetitive streets: at most 0.45 (default angle threshold).
+  double min_relative_inlier_ratio = 0.55;
+  // The relative pose and the rotation the similarity gives the revisit must agree (radians).
+  double max_rotation_disagreement = 0.05;
+  // The ring shift of the relative rotation must be the one the appearance found.
+  bool check_ring_shift = true;
   // A verified similarity must move the revisiting keyframe by at most this share of the path
   // driven (keyframe centre to centre) since the place seen before: drift beyond it is not
   // drift but a wrong place that looks alike (a repetitive street).
   double max_drift_share = 0.1;
+  // Before any matching, a candidate must be within reach of the drift bound: its keyframe no
+  // farther from the revisit in the map than max_drift_share of the path between them plus
+  // this many mean keyframe steps (how far from a place a revisit may pass and look alike).
+  double revisit_reach_keyframes = 10.0;
   int cooldown_keyframes = 20;  // keyframes after a closure before the next one is tried
   double loop_edge_weight = 10.0;
   PoseGraphOptions pose_graph;
@@ -81,6 +122,59 @@ struct LoopClosureOptions {
   unsigned seed = 1;
 
   std::string Check() const;
+  static CentralRelativePoseOptions DefaultCentralRelativePose();
+  static NoncentralRelativePoseOptions DefaultGeneralizedRelativePose();
+};
+
+// The matches between a revisiting keyframe ("now") and a candidate ("then"). 2-D: unit
+// bearings in the cameras of each keyframe; 3-D: the map points (world) of the matches whose
+// corners both belong to a track with a point, and those tracks (now, then).
+struct LoopMatches {
+  std::vector<Eigen::Vector3d> bearings_now, bearings_then;
+  std::vector<int> cameras_now, cameras_then;
+  std::vector<Eigen::Vector3d> points_now, points_then;
+  std::vector<std::pair<int, int>> tracks;
+  std::vector<int> match_of_point;  // the 2-D match of each 3-D match (empty: not known)
+};
+
+struct LoopVerification {
+  bool accepted = false;
+  std::string refusal;  // why it was refused (empty when accepted)
+  // Relative pose: rig_then_from_rig_now (central: unit translation), its inliers among the
+  // 2-D matches.
+  int matches = 0, relative_inliers = 0;
+  Rigid3d then_from_now;
+  int ring_shift = -1;  // of the relative rotation (RingShiftOfRotation)
+  // 3-D similarity then_from_now of the world (the drifted revisit onto the place), its inliers
+  // among the 3-D matches, and the tracks of those inliers that are also inliers of the
+  // relative pose (when match_of_point is given): the pairs the closure merges.
+  int points = 0, similarity_inliers = 0;
+  Sim3d similarity;
+  std::vector<std::pair<int, int>> inlier_tracks;
+  double rotation_disagreement = 0.0;  // radians, relative pose vs similarity
+  double drift_share = 0.0;            // LoopDriftShare of the similarity
+};
+
+// The geometric verification of a candidate, cheapest first: the 3-D similarity in RANSAC and
+// the drift bound (max_drift_share), the relative pose of the rig (inliers and ratio) and the
+// ring shift it implies against the appearance's `shift`, and their rotations' agreement.
+// `world_from_keyframe` are the map's keyframe poses, `ring` the detector's.
+LoopVerification VerifyLoop(const Rig& rig, const std::vector<int>& ring, int shift,
+                            const LoopMatches& matches,
+                            const std::vector<Rigid3d>& world_from_keyframe, int then, int now,
+                            const LoopClosureOptions& options, unsigned seed);
+
+// Where the loop closer's time goes (CPU seconds of the calling thread, summed over the
+// keyframes; the global adjustment runs on that thread when its num_threads is 1).
+struct LoopClosureTimings {
+  double prepare = 0.0;  // thumbnails, prepared images, bearings of each keyframe
+  double query = 0.0;    // appearance search
+  double match = 0.0;    // ZNCC matching of the candidates
+  double verify = 0.0;   // relative pose, similarity
+  double correct = 0.0;  // pose graph and map correction
+  double global_bundle_adjustment = 0.0;
+  int keyframes = 0, queries = 0, candidates = 0, closures = 0;
+  std::string Summary() const;
 };
 
 // What a closure did: where, and how much it moved the revisiting keyframe.
@@ -89,12 +183,20 @@ struct LoopClosureEvent {
   int candidate_keyframe = -1, candidate_frame = -1;  // the place seen before
   int shift = 0;
   double score = 0.0;
-  int matches = 0, inliers = 0;
+  int matches = 0, inliers = 0;  // 3-D matches and the similarity's inliers
+  // The relative pose: 2-D matches, inliers, and its disagreement with the similarity (radians).
+  int relative_matches = 0, relative_inliers = 0;
+  double rotation_disagreement = 0.0;
   double correction_translation = 0.0;  // how far the revisiting keyframe moved (map units)
   double correction_scale = 1.0;        // its scale correction
   double ms = 0.0;
   std::string Summary() const;
 };
+
+// Whether a candidate can pass the drift bound at all (max_drift_share, revisit_reach_keyframes)
+// given the map's keyframe poses, before any matching.
+bool LoopWithinReach(const std::vector<Rigid3d>& world_from_rig, int then, int now,
+                     const LoopClosureOptions& options);
 
 // How far then_from_now moves keyframe `now` (world_from_rig poses of the map), as a share of
 // the path from keyframe `then` to `now` through the keyframe centres; infinity for no path.
@@ -109,19 +211,25 @@ class LoopCloser {
   // loop was closed and the tracker's map corrected.
   bool AddKeyframe(const std::vector<cv::Mat>& images, const TrackedFrame& frame, Tracker* tracker,
                    LoopClosureEvent* event);
+  const LoopClosureTimings& timings() const { return timings_; }
+  ~LoopCloser();
 
  private:
   struct KeyframeData {
     int frame = -1;
-    std::vector<cv::Mat> prepared;                      // per camera
-    std::vector<std::vector<Eigen::Vector2d>> corners;  // per camera, prepared pixels
-    std::vector<std::vector<int>> tracks;               // per camera, track of each corner
+    std::vector<cv::Mat> prepared;                       // per camera (ring cameras only)
+    std::vector<std::vector<Eigen::Vector2d>> corners;   // per camera, prepared pixels
+    std::vector<std::vector<Eigen::Vector3d>> bearings;  // per camera, unit, of each corner
+    std::vector<std::vector<int>> tracks;                // per camera, track of each corner
   };
+  LoopMatches Match(const KeyframeData& now, const KeyframeData& then, int shift,
+                    const Tracker& tracker, int now_keyframe, int then_keyframe) const;
   Rig rig_;
   LoopClosureOptions options_;
   LoopDetector detector_;
   std::vector<KeyframeData> keyframes_;
   int last_closure_ = -1000000;
+  LoopClosureTimings timings_;
 };
 
 }  // namespace omni

@@ -24,6 +24,8 @@ std::string TrackerOptions::Check() const {
     if (!check.empty()) return std::string(name) + "." + check;
   if (num_free_keyframes < 1) return "num_free_keyframes: expected at least 1";
   if (num_fixed_keyframes < 1) return "num_fixed_keyframes: expected at least 1";
+  if (global_bundle_adjustment_threads < 1)
+    return "global_bundle_adjustment_threads: expected at least 1";
   if (min_init_points < 5) return "min_init_points: expected at least 5";
   if (min_resection_inliers < 4) return "min_resection_inliers: expected at least 4";
   if (!(max_jump_ratio > 1.0)) return "max_jump_ratio: expected more than 1";
@@ -789,6 +791,7 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust() {
   options.mode = m.options.central ? BundleAdjustmentOptions::Mode::kCentral
                                    : BundleAdjustmentOptions::Mode::kNonCentral;
   options.linear_solver = BundleAdjustmentOptions::LinearSolver::kSparseSchur;
+  options.num_threads = m.options.global_bundle_adjustment_threads;
   if (problem.observations.empty()) return {};
   const BundleAdjustmentSummary summary = LocalBundleAdjust(m.rig, options, &problem);
   if (!summary.success) return summary;

@@ -40,6 +40,9 @@ struct TrackerOptions {
   BundleAdjustmentOptions bundle_adjustment;  // its mode follows `central`
   int num_free_keyframes = 3;                 // issue 8: newest n keyframes free (default 3)
   int num_fixed_keyframes = 7;                // and the N before them fixed (7–10)
+  // Threads of the global adjustment after a loop closure (a one-off solve of the whole map,
+  // the largest single cost of a closure: the SfM thread waits for it).
+  int global_bundle_adjustment_threads = 2;
   // Non-central initialisation: the generalised relative pose replaces the central five-point
   // one only when it triangulates this many times as many points.
   double noncentral_init_margin = 1.2;

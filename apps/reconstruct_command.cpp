@@ -46,6 +46,7 @@ struct ReconstructCommandOptions {
   bool central = false;
   bool non_central = false;
   double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
+  std::string loop_replay = "batch";
   PipelineOptions pipeline;
 };
 
@@ -117,6 +118,13 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
   if (o.central && o.non_central)
     throw InputError("", "--central, --non-central", "give at most one of them");
   if (!(o.frame_rate > 0.0)) throw InputError("", "--frame-rate", "expected a positive rate");
+  if (o.loop_replay == "batch") {
+    o.pipeline.loop_replay = LoopReplay::kBatch;
+  } else if (o.loop_replay == "incremental") {
+    o.pipeline.loop_replay = LoopReplay::kIncremental;
+  } else {
+    throw InputError("", "--loop-replay", "expected batch or incremental");
+  }
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
   o.pipeline.tracker.central = o.central ? true : o.non_central ? false : rig.central;
@@ -248,7 +256,9 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
          {"correction_scale", e.correction_scale},
          {"ms", e.ms},
          {"surface_replay_seconds",
-          i < result.loop_replay_seconds.size() ? result.loop_replay_seconds[i] : 0.0}});
+          i < result.loop_replay_seconds.size() ? result.loop_replay_seconds[i] : 0.0},
+         {"surface_replay_keyframes",
+          i < result.loop_replay_keyframes.size() ? result.loop_replay_keyframes[i] : 0}});
   }
   summary["colmap_images"] = colmap.images;
   summary["colmap_points"] = colmap.points;
@@ -256,6 +266,8 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
   summary["loop_closure"] = o.pipeline.loop_closure;
   summary["loop_closures"] = loops;
   summary["surface_replay_seconds"] = result.replay_seconds;
+  summary["loop_replay"] = o.loop_replay;
+  summary["prefetch_frames_ahead"] = o.pipeline.prefetch.frames_ahead;
   summary["point_colors_seconds"] = color_stats.seconds;
   WriteTextFileAtomically(partial / kSummaryFile, summary.dump(2) + "\n");
   Publish(partial, out);
@@ -318,6 +330,15 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
                     "Do not detect revisits nor correct the drift");
   command->add_flag("!--no-global-ba", o->pipeline.loop.global_bundle_adjustment,
                     "After a loop closure, correct with the pose graph only");
+  command
+      ->add_option("--loop-replay", o->loop_replay,
+                   "Surface after a loop closure: batch (the corrected keyframes sculpted at "
+                   "once) or incremental (one by one from scratch)")
+      ->capture_default_str();
+  command
+      ->add_option("--prefetch", o->pipeline.prefetch.frames_ahead,
+                   "Frames whose images are decoded ahead of the SfM")
+      ->capture_default_str();
   command->add_option("--frame-rate", o->frame_rate, "Timestamps of poses.tum: frame / rate")
       ->capture_default_str();
   command->callback([o, &global] { RunReconstruct(*o, global); });

@@ -13,12 +13,13 @@
 
 #include <chrono>
 #include <filesystem>
-#include <future>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 
 #include "apps/commands.h"
+#include "apps/pipeline/frame_prefetcher.h"
 #include "apps/pipeline/point_colors.h"
 #include "apps/pipeline/sfm_stats.h"
 #include "calib/atomic_file.h"
@@ -46,6 +47,7 @@ struct SfmCommandOptions {
   // largest offset to it, the log says the non-central mode is the right one.
   double scene_depth = 10.0;
   double max_central_offset_ratio = 0.01;
+  FramePrefetcherOptions prefetch;
   TrackBuilderOptions tracks;
   TrackerOptions tracker;
 };
@@ -65,7 +67,7 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
   o.tracker.central = o.central ? true : o.non_central ? false : rig.central;
-  for (const std::string& problem : {o.tracks.Check(), o.tracker.Check()})
+  for (const std::string& problem : {o.prefetch.Check(), o.tracks.Check(), o.tracker.Check()})
     if (!problem.empty()) throw InputError("", "options", problem);
   spdlog::info("sfm: {} frames, {} cameras, {} mode (largest camera offset {:.3f} m)",
                drive.NumFrames(), rig.NumCameras(), o.tracker.central ? "central" : "non-central",
@@ -98,17 +100,15 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
   auto last_progress = start;
   SfmStats stats;
   std::vector<FinalizedKeyframe> keyframes;
-  // The next frame's images are decoded while the current one is processed.
-  auto load = [&drive, &rig](size_t frame) {
-    std::vector<cv::Mat> images;
-    for (size_t c = 0; c < rig.NumCameras(); ++c) images.push_back(drive.LoadGray(frame, c));
-    return images;
-  };
-  std::future<std::vector<cv::Mat>> next = std::async(std::launch::async, load, 0);
+  // The next frames' images are decoded on their own thread while the SfM runs (the same
+  // prefetcher as reconstruct's); stopped and joined when this function ends.
+  FramePrefetcher prefetcher(drive, num_frames, o.prefetch);
   for (size_t f = 0; f < num_frames; ++f) {
     auto load_start = std::chrono::steady_clock::now();
-    std::vector<cv::Mat> images = next.get();  // rethrows a loading error
-    if (f + 1 < num_frames) next = std::async(std::launch::async, load, f + 1);
+    std::optional<PrefetchedFrame> next = prefetcher.Next();
+    if (!next) break;  // cannot happen: every frame is delivered until stopped
+    next->Rethrow();   // a frame that cannot be read ends the run (exit code 2)
+    std::vector<cv::Mat> images = std::move(next->images);
     stats.load_seconds += SecondsSince(load_start);
 
     // Search regions by reprojection of the map points once the pose is predicted.
@@ -211,6 +211,10 @@ void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global) {
                    "Keyframe once fewer of the last keyframe's points are tracked")
       ->capture_default_str();
   command->add_option("--max-frames", o->max_frames, "0: the whole drive")->capture_default_str();
+  command
+      ->add_option("--prefetch", o->prefetch.frames_ahead,
+                   "Frames whose images are decoded ahead of the SfM")
+      ->capture_default_str();
   command
       ->add_option("--scene-depth", o->scene_depth,
                    "Typical scene depth (m), for the warning on large camera offsets in central "

@@ -19,10 +19,12 @@
 namespace omni {
 
 std::string PipelineOptions::Check() const {
-  for (const auto& [name, check] : {std::pair<const char*, std::string>{"tracks", tracks.Check()},
-                                    {"tracker", tracker.Check()},
-                                    {"sculptor", sculptor.Check()},
-                                    {"loop", loop.Check()}})
+  for (const auto& [name, check] :
+       {std::pair<const char*, std::string>{"prefetch", prefetch.Check()},
+        {"tracks", tracks.Check()},
+        {"tracker", tracker.Check()},
+        {"sculptor", sculptor.Check()},
+        {"loop", loop.Check()}})
     if (!check.empty()) return std::string(name) + "." + check;
   if (queue_capacity < 1) return "queue_capacity: expected at least 1";
   if (max_frames < 0) return "max_frames: expected 0 (all) or more";
@@ -52,6 +54,19 @@ std::string PipelineKeyframesCsvRow(const PipelineKeyframeRow& row) {
   std::ostringstream o;
   o << KeyframeStatsCsvRow(row.surface) << ',' << row.queue_ms << ',' << row.replay;
   return o.str();
+}
+
+SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mode, double scale,
+                                      size_t keyframes) {
+  SculptorOptions options = base;
+  if (mode != LoopReplay::kBatch || !(scale > 0.0) || keyframes == 0) return options;
+  // One batch of them all, with the first sculpting's s so that the filters and the Steiner
+  // grid keep their meaning (§5.1); the later keyframes one by one.
+  options.scale = scale;
+  options.init_keyframes = static_cast<int>(keyframes);
+  options.batch_init = true;
+  options.batch_with_known_scale = true;
+  return options;
 }
 
 namespace {
@@ -97,14 +112,20 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
           result.keyframes.push_back(std::move(keyframe));
         }
       };
+      // Stopped and joined when this scope ends (an abort, an error, or the last frame).
+      FramePrefetcher prefetcher(drive, result.frames_total, options.prefetch);
       for (size_t f = 0; f < result.frames_total && !abort; ++f) {
         const auto frame_start = Clock::now();
         PipelineFrameRow row;
         row.frame = f;
         row.name = drive.FrameName(f);
+        std::optional<PrefetchedFrame> next = prefetcher.Next();
+        if (!next) break;  // cannot happen: the prefetcher delivers every frame until stopped
+        assert(next->frame == f);
         std::vector<cv::Mat> images;
         try {
-          for (size_t c = 0; c < rig.NumCameras(); ++c) images.push_back(drive.LoadGray(f, c));
+          next->Rethrow();
+          images = std::move(next->images);
           row.loaded = true;
         } catch (const InputError& error) {
           result.skipped.push_back("frame " + row.name + " skipped: " + error.what());
@@ -192,7 +213,8 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
         if (item->replay) {
           // The map was corrected: sculpt the corrected keyframes from scratch.
           ++replay;
-          sculptor = std::make_unique<IncrementalSculptor>(options.sculptor);
+          sculptor = std::make_unique<IncrementalSculptor>(ReplaySculptorOptions(
+              options.sculptor, options.loop_replay, sculptor->scale(), item->keyframes.size()));
           keyframes_sculpted = 0;
         }
         for (const SurfaceKeyframe& keyframe : item->keyframes) {
@@ -204,6 +226,7 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
           const double replay_seconds = SecondsSince(busy);
           result.replay_seconds += replay_seconds;
           result.loop_replay_seconds.push_back(replay_seconds);
+          result.loop_replay_keyframes.push_back(item->keyframes.size());
         }
       }
       if (!sfm_error) {

@@ -3,12 +3,14 @@
 // drive's frames, tracks them (sfm/track_builder.h, sfm/tracker.h) and hands every keyframe
 // that left the local adjustment window (its pose and points no longer move) through a bounded
 // queue to a surface thread running the incremental sculptor (surface/sculptor.h). The calling
-// thread reports progress. A frame whose image cannot be read is reported and skipped.
+// thread reports progress. The images are decoded ahead on a thread of their own
+// (apps/pipeline/frame_prefetcher.h). A frame whose image cannot be read is reported and skipped.
 
 #include <functional>
 #include <string>
 #include <vector>
 
+#include "apps/pipeline/frame_prefetcher.h"
 #include "calib/drive.h"
 #include "calib/ply.h"
 #include "sfm/loop_closure.h"
@@ -18,7 +20,16 @@
 
 namespace omni {
 
+// How the surface thread rebuilds the surface after a loop correction moved the map.
+enum class LoopReplay {
+  kIncremental,  // a new sculptor takes the corrected keyframes one by one (the first
+                 // init_keyframes in one batch, which measures s again, paper §5.1)
+  kBatch,        // a new sculptor sculpts all the corrected keyframes in one batch (§5.1's
+                 // initialisation on the whole map), with the scale s of the first sculpting
+};
+
 struct PipelineOptions {
+  FramePrefetcherOptions prefetch;
   TrackBuilderOptions tracks;
   TrackerOptions tracker;
   SculptorOptions sculptor;
@@ -26,9 +37,13 @@ struct PipelineOptions {
   // sculptor on the corrected finalised keyframes (the keyframes queued meanwhile wait).
   bool loop_closure = true;
   LoopClosureOptions loop;
+  LoopReplay loop_replay = LoopReplay::kBatch;
   // Keyframes waiting between the SfM and the surface threads; a full queue stalls the SfM
-  // (backpressure), so memory stays bounded however slow the surface is.
-  int queue_capacity = 8;
+  // (backpressure), so memory stays bounded however slow the surface is. A keyframe item is
+  // ~22 KB on the paper drive (130 points of 3 rays), so 32 of them ~0.7 MB: room for the
+  // keyframes the SfM makes while the surface replays a corrected map (a replay item, the
+  // whole map, is ~10 MB there).
+  int queue_capacity = 32;
   int max_frames = 0;            // 0: the whole drive
   int snapshot_every = 0;        // snapshot callback every K sculpted keyframes; 0: none
   double progress_period = 2.0;  // seconds between two progress callbacks
@@ -83,10 +98,11 @@ struct PipelineResult {
   // and the surface time of the replay that followed it.
   std::vector<double> loop_correction_rotation_deg;
   std::vector<double> loop_replay_seconds;
-  double replay_seconds = 0.0;  // surface time spent replaying after corrections
+  std::vector<size_t> loop_replay_keyframes;  // keyframes re-sculpted by each replay
+  double replay_seconds = 0.0;                // surface time spent replaying after corrections
   // SfM time per stage (wall seconds; the SfM thread's): reading the images, detection and
   // matching, resection, triangulation, local adjustment, and loop detection and correction.
-  double load_seconds = 0.0;
+  double load_seconds = 0.0;  // waiting for the prefetcher's next decoded frame
   TrackBuilder::Timings sfm_front;
   Tracker::Timings sfm_back;
   double loop_closure_seconds = 0.0;
@@ -96,6 +112,12 @@ struct PipelineResult {
 // or every frame was skipped; rethrows, on the calling thread, what a stage thread threw.
 PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
                            const PipelineCallbacks& callbacks = {});
+
+// The options of the sculptor that replays the `keyframes` corrected keyframes after a loop
+// closure, the first sculptor having measured `scale` (0: not yet known). kBatch with s known:
+// all of them in one batch at that s, then one by one; otherwise `base` (s measured again).
+SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mode, double scale,
+                                      size_t keyframes);
 
 std::string PipelineFramesCsvHeader();
 std::string PipelineFramesCsvRow(const PipelineFrameRow& row);

@@ -180,16 +180,30 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
   const size_t init = SculptorOptions().init_keyframes;
   ASSERT_GT(poses.size(), init);
   // Only the rows of the last sculpting count (after a loop closure the sculptor is replayed on
-  // the corrected keyframes; the last column numbers the replays).
+  // the corrected keyframes; the last column numbers the replays). A batch replay (the
+  // default) sculpts all the keyframes of the corrected map in its batch row.
   const std::string last_replay = SplitText(rows.back(), ',').back();
-  size_t points_in = 0, final_rows = 0;
+  size_t batch_keyframes = init;
+  if (last_replay != "0") {
+    ASSERT_EQ(summary["loop_replay"].get<std::string>(), "batch");
+    batch_keyframes =
+        summary["loop_closures"][std::stoul(last_replay) - 1]["surface_replay_keyframes"]
+            .get<size_t>();
+    EXPECT_GT(batch_keyframes, init);
+  }
+  size_t points_in = 0, final_rows = 0, final_batch_rows = 0;
   for (size_t r = 1; r < rows.size(); ++r) {
     const std::vector<std::string> columns = SplitText(rows[r], ',');
     if (columns.back() != last_replay) continue;
+    if (columns[1] == "1") {
+      EXPECT_EQ(final_rows, 0u) << "the batch row comes first";
+      ++final_batch_rows;
+    }
     ++final_rows;
     points_in += std::stoul(columns[2]);
   }
-  EXPECT_EQ(final_rows, 1 + poses.size() - init);
+  EXPECT_EQ(final_batch_rows, 1u);
+  EXPECT_EQ(final_rows, 1 + poses.size() - batch_keyframes);
   EXPECT_EQ(points_in, ReadPlyPoints(out / "points.ply").points.size());
   EXPECT_EQ(SplitText(ReadTextFile(out / "stats" / "sfm_frames.csv")).size(),
             1 + summary["frames"].get<size_t>());
@@ -348,8 +362,9 @@ TEST(ReconstructShortDrive, LoopClosureLowersThePoseErrorAndTheLoopMeets) {
   const fs::path scratch = ScratchDir("loop");
   const fs::path drive(OMNI_SHORT_DRIVE_DIR);
   const fs::path with = scratch / "with", without = scratch / "without";
-  auto run =
-      RunOmnisculpt({"--quiet", "reconstruct", drive.string(), "--out", with.string()}, scratch);
+  auto run = RunOmnisculpt(
+      {"--quiet", "reconstruct", drive.string(), "--out", with.string(), "--loop-replay", "batch"},
+      scratch);
   ASSERT_EQ(run.exit_code, 0) << run.err;
   run = RunOmnisculpt(
       {"--quiet", "reconstruct", drive.string(), "--out", without.string(), "--no-loop-closure"},
@@ -389,8 +404,29 @@ TEST(ReconstructShortDrive, LoopClosureLowersThePoseErrorAndTheLoopMeets) {
   // The final surface is the corrected map's: a replay row in the stats, and a manifold.
   const std::vector<std::string> rows = SplitText(ReadTextFile(with / "stats" / "keyframes.csv"));
   EXPECT_NE(rows[0].find(",queue_ms,replay"), std::string::npos);
-  EXPECT_EQ(SplitText(rows.back(), ',').back(), std::to_string(summary["loop_closures"].size()));
-  EXPECT_TRUE(CheckMesh(ReadPlyMesh(with / "surface.ply")).ok);
+  const std::string replays = std::to_string(summary["loop_closures"].size());
+  EXPECT_EQ(SplitText(rows.back(), ',').back(), replays);
+  const MeshCheckReport check = CheckMesh(ReadPlyMesh(with / "surface.ply"));
+  EXPECT_TRUE(check.ok) << check.ToText();
+  EXPECT_TRUE(summary["manifold"].get<bool>());
+  // The batch replay: the corrected keyframes handed over before the closure (all but the
+  // local window, so more than the 40 of §5.1 and at most up to the revisit) in the first row
+  // of the last sculpting, a batch row with all their points; then one row per keyframe.
+  EXPECT_EQ(summary["loop_replay"].get<std::string>(), "batch");
+  const nlohmann::json& last_loop = summary["loop_closures"].back();
+  const size_t replayed = last_loop["surface_replay_keyframes"].get<size_t>();
+  EXPECT_GT(replayed, static_cast<size_t>(SculptorOptions().init_keyframes));
+  EXPECT_LE(replayed, last_loop["keyframe"].get<size_t>() + 1);
+  std::vector<std::vector<std::string>> last_rows;
+  for (size_t r = 1; r < rows.size(); ++r) {
+    std::vector<std::string> columns = SplitText(rows[r], ',');
+    if (columns.back() == replays) last_rows.push_back(std::move(columns));
+  }
+  ASSERT_FALSE(last_rows.empty());
+  EXPECT_EQ(last_rows[0][1], "1");  // batch
+  for (size_t r = 1; r < last_rows.size(); ++r) EXPECT_EQ(last_rows[r][1], "0");
+  EXPECT_EQ(last_rows.size(), 1 + summary["keyframes"].get<size_t>() - replayed);
+  EXPECT_GT(std::stoul(last_rows[0][2]), 0u);  // points_in
 }
 
 }  // namespace

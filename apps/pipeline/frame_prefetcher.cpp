@@ -1,0 +1,101 @@
+#include "apps/pipeline/frame_prefetcher.h"
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <utility>
+
+namespace omni {
+
+std::string FramePrefetcherOptions::Check() const {
+  if (frames_ahead < 1) return "frames_ahead: expected at least 1";
+  return {};
+}
+
+FramePrefetcher::FramePrefetcher(size_t num_frames, Loader loader,
+                                 const FramePrefetcherOptions& options)
+    : num_frames_(num_frames),
+      frames_ahead_(static_cast<size_t>(std::max(options.frames_ahead, 1))),
+      loader_(std::move(loader)) {
+  assert(options.Check().empty());
+  thread_ = std::thread([this] { Run(); });
+}
+
+FramePrefetcher::FramePrefetcher(const Drive& drive, size_t num_frames,
+                                 const FramePrefetcherOptions& options)
+    : FramePrefetcher(
+          num_frames,
+          [&drive](size_t frame) {
+            std::vector<cv::Mat> images;
+            for (size_t c = 0; c < drive.rig().NumCameras(); ++c)
+              images.push_back(drive.LoadGray(frame, c));
+            return images;
+          },
+          options) {}
+
+FramePrefetcher::~FramePrefetcher() { Stop(); }
+
+void FramePrefetcher::Run() {
+  for (size_t f = 0; f < num_frames_; ++f) {
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      room_.wait(lock, [&] { return stop_ || in_flight_ < frames_ahead_; });
+      if (stop_) return;
+      ++in_flight_;
+    }
+    PrefetchedFrame frame;
+    frame.frame = f;
+    try {
+      frame.images = loader_(f);
+    } catch (...) {
+      frame.images.clear();
+      frame.error = std::current_exception();
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (stop_) return;
+    frames_.push_back(std::move(frame));
+    max_ready_ = std::max(max_ready_, frames_.size());
+    ready_.notify_one();
+  }
+}
+
+std::optional<PrefetchedFrame> FramePrefetcher::Next() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  if (stop_ || next_to_take_ >= num_frames_) return std::nullopt;
+  if (frames_.empty()) {
+    const auto start = std::chrono::steady_clock::now();
+    ready_.wait(lock, [&] { return stop_ || !frames_.empty(); });
+    wait_seconds_ +=
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (frames_.empty()) return std::nullopt;
+  }
+  PrefetchedFrame frame = std::move(frames_.front());
+  frames_.pop_front();
+  --in_flight_;
+  ++next_to_take_;
+  room_.notify_one();
+  return frame;
+}
+
+void FramePrefetcher::Stop() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+    frames_.clear();
+    room_.notify_all();
+    ready_.notify_all();
+  }
+  if (thread_.joinable()) thread_.join();
+}
+
+double FramePrefetcher::WaitSeconds() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return wait_seconds_;
+}
+
+size_t FramePrefetcher::MaxReady() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return max_ready_;
+}
+
+}  // namespace omni

@@ -419,22 +419,11 @@ std::vector<std::pair<int, int>> MatchWindows(const WindowMatrix& windows1,
   Eigen::VectorXi best_of_column(scores.cols());
   for (Eigen::Index j = 0; j < scores.cols(); ++j) scores.col(j).maxCoeff(&best_of_column[j]);
   for (Eigen::Index i = 0; i < scores.rows(); ++i) {
-    float best = -2.0f, second = -2.0f;
-    Eigen::Index best_j = -1;
-    for (Eigen::Index j = 0; j < scores.cols(); ++j) {
-      const float score = scores(i, j);
-      if (score > best) {
-        second = best;
-        best = score;
-        best_j = j;
-      } else if (score > second) {
-        second = score;
-      }
-    }
-    if (best_j < 0 || best < options.min_zncc) continue;
-    if (second > -2.0f && !(std::sqrt(std::max(0.0f, 1.0f - best)) <
-                            options.max_distance_ratio * std::sqrt(std::max(0.0f, 1.0f - second))))
-      continue;
+    BestTwoZncc two;
+    for (Eigen::Index j = 0; j < scores.cols(); ++j) two.Offer(scores(i, j), static_cast<int>(j));
+    const Eigen::Index best_j = two.index;
+    if (best_j < 0 || two.best < options.min_zncc) continue;
+    if (!IsDistinctZncc(two.best, two.second, options.max_distance_ratio)) continue;
     if (options.mutual && best_of_column[best_j] != i) continue;
     matches.emplace_back(static_cast<int>(i), static_cast<int>(best_j));
   }

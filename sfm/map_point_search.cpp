@@ -138,9 +138,7 @@ bool SearchEveryPixel(const std::vector<float>& reference, const cv::Mat& image,
       if (maximum) second = v;
     }
   const double top = at(bi, bj);
-  if (second > kNone && !(std::sqrt(std::max(0.0, 1.0 - top)) <
-                          max_distance_ratio * std::sqrt(std::max(0.0, 1.0 - second))))
-    return false;
+  if (!IsDistinctZncc(top, second, max_distance_ratio)) return false;
   // Vertex of the parabola through the three samples around the maximum, within half a pixel.
   auto vertex = [](float minus, float centre, float plus) {
     if (minus == kNone || plus == kNone) return 0.0;
@@ -257,8 +255,7 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
       }
       const int cx = static_cast<int>(std::floor(predicted.x() / cell));
       const int cy = static_cast<int>(std::floor(predicted.y() / cell));
-      double best = -2.0, second = -2.0;
-      int best_corner = -1;
+      BestTwoZncc two;
       bool reference_ready = false, reference_ok = false;
       for (int y = std::max(0, cy - 1); y <= std::min(rows - 1, cy + 1); ++y)
         for (int x = std::max(0, cx - 1); x <= std::min(cols - 1, cx + 1); ++x)
@@ -277,20 +274,11 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
               corner_windows[i] = SubpixelWindow(prepared[c], corners[c][i], options_.half_window);
             }
             if (corner_windows[i].empty()) continue;
-            const double score = Dot(reference_window, corner_windows[i]);
-            if (score > best) {
-              second = best;
-              best = score;
-              best_corner = i;
-            } else if (score > second) {
-              second = score;
-            }
+            two.Offer(Dot(reference_window, corner_windows[i]), i);
           }
-      if (best_corner < 0 || best < options_.min_zncc) continue;
-      if (second > -2.0 && !(std::sqrt(std::max(0.0, 1.0 - best)) <
-                             options_.max_distance_ratio * std::sqrt(std::max(0.0, 1.0 - second))))
-        continue;
-      found[c].push_back({index, best_corner, corners[c][best_corner], best});
+      if (two.index < 0 || two.best < options_.min_zncc) continue;
+      if (!IsDistinctZncc(two.best, two.second, options_.max_distance_ratio)) continue;
+      found[c].push_back({index, two.index, corners[c][two.index], two.best});
     }
   });
 

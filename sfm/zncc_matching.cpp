@@ -187,6 +187,12 @@ MatchBuffers& ThreadBuffers() {
 
 }  // namespace
 
+bool IsDistinctZncc(double best, double second, double max_distance_ratio) {
+  if (second <= BestTwoZncc::kNone) return true;
+  return std::sqrt(std::max(0.0, 1.0 - best)) <
+         max_distance_ratio * std::sqrt(std::max(0.0, 1.0 - second));
+}
+
 std::string ZnccOptions::Check() const {
   if (half_window < 1) return "half_window: expected at least 1";
   if (!(min_zncc > -1.0 && min_zncc < 1.0)) return "min_zncc: expected a value in (-1, 1)";
@@ -264,11 +270,7 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
   for (size_t i = 0; i < corners1.size(); ++i) {
     const int j = best1[i];
     if (j < 0 || score1[i] < options.min_zncc) continue;
-    if (second1[i] > kNone) {
-      const double d_best = std::sqrt(std::max(0.0, 1.0 - score1[i]));
-      const double d_second = std::sqrt(std::max(0.0, 1.0 - second1[i]));
-      if (!(d_best < options.max_distance_ratio * d_second)) continue;
-    }
+    if (!IsDistinctZncc(score1[i], second1[i], options.max_distance_ratio)) continue;
     if (options.mutual && best2[j] != static_cast<int>(i)) continue;
     ZnccMatch match{static_cast<int>(i), j, score1[i], corners2[j]};
     if (options.subpixel)

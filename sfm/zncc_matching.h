@@ -44,6 +44,27 @@ struct ZnccMatch {
   Eigen::Vector2d pixel2 = Eigen::Vector2d::Zero();
 };
 
+// The best and second-best ZNCC scores offered, and the index of the best (-1: none yet).
+struct BestTwoZncc {
+  static constexpr double kNone = -2.0;  // below any ZNCC
+  double best = kNone, second = kNone;
+  int index = -1;
+  void Offer(double score, int i) {
+    if (score > best) {
+      second = best;
+      best = score;
+      index = i;
+    } else if (score > second) {
+      second = score;
+    }
+  }
+};
+
+// The distinctiveness (ratio) test of a ZNCC match: the window distance of the best, which is
+// proportional to sqrt(1 − zncc), is below max_distance_ratio times that of the second best;
+// true when there is no second (second at or below BestTwoZncc::kNone).
+bool IsDistinctZncc(double best, double second, double max_distance_ratio);
+
 // ZNCC of the windows centred at two subpixel positions (bilinear sampling); NaN when a window
 // leaves its image or is flat.
 double Zncc(const cv::Mat& image1, const Eigen::Vector2d& pixel1, const cv::Mat& image2,

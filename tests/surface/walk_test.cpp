@@ -91,5 +91,59 @@ TEST(DelaunayWalk, TraceRayIncrementsTheCellsOfTheWalk) {
   }
 }
 
+// The walk from vertices of a cartesian grid (the Steiner grid of §3.3): the stars of such
+// vertices are maximally degenerate (co-spherical, co-planar vertices), which is where the start
+// of the walk (a visibility walk in the star of the point, with a search of the whole star as
+// fallback) is most likely to go wrong. Checked against a brute-force segment–tetrahedron test
+// over every cell.
+TEST(DelaunayWalk, FromCartesianGridVerticesVisitsExactlyTheCrossedCells) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  DelaunayMesh mesh;
+  const int n = 6;  // n³ grid vertices at integer coordinates 0 .. n − 1
+  std::vector<int> grid;
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      for (int k = 0; k < n; ++k) grid.push_back(mesh.Insert(Eigen::Vector3d(i, j, k), -1, true));
+    }
+  }
+  // A few points inside, some on grid planes (more degenerate stars).
+  std::vector<int> points;
+  for (int i = 0; i < 60; ++i) {
+    Eigen::Vector3d p(0.5 + 4.0 * u(rng), 0.5 + 4.0 * u(rng), 0.5 + 4.0 * u(rng));
+    if (i % 3 == 0) p.z() = std::round(p.z());
+    points.push_back(mesh.Insert(p, i));
+  }
+  ASSERT_TRUE(mesh.IsValid());
+  const std::vector<CellKey> cells = mesh.FiniteCells();
+  std::vector<std::array<Eigen::Vector3d, 4>> tets;
+  for (const CellKey& c : cells) {
+    tets.push_back(
+        {mesh.Position(c[0]), mesh.Position(c[1]), mesh.Position(c[2]), mesh.Position(c[3])});
+  }
+  size_t rays = 0, visited = 0, from_hull = 0;
+  for (int ray = 0; ray < 300; ++ray) {
+    // From grid vertices (hull vertices included: their stars hold infinite cells) and points,
+    // to generic targets inside the grid.
+    const bool from_grid = ray % 2 == 0;
+    const int from = from_grid ? grid[rng() % grid.size()] : points[rng() % points.size()];
+    const Eigen::Vector3d target(0.2 + 4.6 * u(rng), 0.2 + 4.6 * u(rng), 0.2 + 4.6 * u(rng));
+    const Eigen::Vector3d p = mesh.Position(from);
+    if (p.minCoeff() == 0.0 || p.maxCoeff() == n - 1) ++from_hull;
+    const std::vector<CellKey> walked = mesh.Walk(from, target);
+    const std::set<CellKey> walked_set(walked.begin(), walked.end());
+    EXPECT_EQ(walked_set.size(), walked.size()) << "a cell visited twice, ray " << ray;
+    std::set<CellKey> expected;
+    for (size_t c = 0; c < cells.size(); ++c) {
+      if (SegmentCrossesTetrahedron(p, target, tets[c])) expected.insert(cells[c]);
+    }
+    EXPECT_EQ(walked_set, expected) << "ray " << ray;
+    ++rays;
+    visited += walked.size();
+  }
+  EXPECT_GT(from_hull, 20u);     // the fallback of the start (infinite cells in the star) ran
+  EXPECT_GT(visited, 3 * rays);  // the rays are not trivially short
+}
+
 }  // namespace
 }  // namespace omni

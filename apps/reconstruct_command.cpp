@@ -249,6 +249,9 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
          {"appearance_score", e.score},
          {"matches", e.matches},
          {"inliers", e.inliers},
+         {"relative_pose_matches", e.relative_matches},
+         {"relative_pose_inliers", e.relative_inliers},
+         {"rotation_disagreement_deg", e.rotation_disagreement * 180.0 / M_PI},
          {"correction_translation", e.correction_translation},
          {"correction_rotation_deg", i < result.loop_correction_rotation_deg.size()
                                          ? result.loop_correction_rotation_deg[i]

@@ -288,6 +288,7 @@ EvalPipeline ReadEvalPipeline(const fs::path& rec) {
       e.candidate_keyframe = loop.value("candidate_keyframe", -1);
       e.candidate_frame = loop.value("candidate_frame", -1);
       e.inliers = loop.value("inliers", 0);
+      e.relative_inliers = loop.value("relative_pose_inliers", 0);
       e.translation = NumberOr(loop, "correction_translation");
       e.rotation_deg = NumberOr(loop, "correction_rotation_deg");
       e.scale = NumberOr(loop, "correction_scale");
@@ -492,6 +493,7 @@ std::string EvalSummaryToJson(const EvalSummary& s) {
            {"candidate_frame", e.candidate_frame},
            {"candidate_keyframe", e.candidate_keyframe},
            {"inliers", e.inliers},
+           {"relative_pose_inliers", e.relative_inliers},
            {"correction_translation", number(e.translation)},
            {"correction_translation_m", number(e.translation * s.poses.gt_from_estimated.scale)},
            {"correction_rotation_deg", number(e.rotation_deg)},
@@ -613,14 +615,14 @@ std::string EvalSummaryToMarkdown(const EvalSummary& s) {
       md << "### Loop closures\n\n"
          << "The correction is the move of the revisiting keyframe (pose graph and global "
             "adjustment); its translation in map units and in metres (× the scale of S).\n\n"
-         << "| # | revisit frame (keyframe) | place frame (keyframe) | inliers | translation "
-            "(map) | translation (m) | rotation (°) | scale | time (ms) | surface replay (s) "
-            "|\n|---|---|---|---|---|---|---|---|---|---|\n";
+         << "| # | revisit frame (keyframe) | place frame (keyframe) | inliers (3-D similarity) | "
+            "inliers (relative pose) | translation (map) | translation (m) | rotation (°) | scale "
+            "| time (ms) | surface replay (s) |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
       for (size_t i = 0; i < pl.loop_closures.size(); ++i) {
         const EvalLoopClosure& e = pl.loop_closures[i];
         md << "| " << i + 1 << " | " << e.frame << " (" << e.keyframe << ") | " << e.candidate_frame
-           << " (" << e.candidate_keyframe << ") | " << e.inliers << " | "
-           << Fixed(e.translation, 3) << " | "
+           << " (" << e.candidate_keyframe << ") | " << e.inliers << " | " << e.relative_inliers
+           << " | " << Fixed(e.translation, 3) << " | "
            << Fixed(e.translation * s.poses.gt_from_estimated.scale, 3) << " | "
            << Fixed(e.rotation_deg, 3) << " | " << Fixed(e.scale, 4) << " | " << Fixed(e.ms, 0)
            << " | " << Fixed(e.replay_seconds, 2) << " |\n";

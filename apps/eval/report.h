@@ -33,7 +33,8 @@ struct EvalOptions {
 struct EvalLoopClosure {
   int keyframe = -1, frame = -1;                      // the revisit
   int candidate_keyframe = -1, candidate_frame = -1;  // the place seen before
-  int inliers = 0;
+  int inliers = 0;                                    // of the 3-D similarity
+  int relative_inliers = 0;  // of the relative pose from the 2-D matches (0: not in the file)
   double translation = 0.0;  // how far the revisiting keyframe moved, map units
   double rotation_deg = std::numeric_limits<double>::quiet_NaN();  // NaN: not in the file
   double scale = 1.0;

@@ -244,7 +244,8 @@ TEST_F(EvalTest, ReconstructJsonGivesThePipelineSectionWithTheLoopClosures) {
     "surface_replay_seconds": 1.5,
     "loop_closures": [{"keyframe": 25, "frame": 100, "candidate_keyframe": 1,
       "candidate_frame": 2, "ring_shift": 0, "appearance_score": 0.8, "matches": 60,
-      "inliers": 40, "correction_translation": 0.4, "correction_rotation_deg": 0.25,
+      "inliers": 40, "relative_pose_inliers": 55, "correction_translation": 0.4,
+      "correction_rotation_deg": 0.25,
       "correction_scale": 1.02, "ms": 350.0, "surface_replay_seconds": 1.5}]})";
   // Keyframes 3 (the batch of the first ones), 4..8 sculpted live, the replay of 3..8 after
   // the closure, then 9 live: the live times are 10, 20, 30, 40, 50 and 60 ms.
@@ -267,6 +268,7 @@ TEST_F(EvalTest, ReconstructJsonGivesThePipelineSectionWithTheLoopClosures) {
   const EvalLoopClosure& loop = pipeline.loop_closures[0];
   EXPECT_EQ(loop.frame, 100);
   EXPECT_EQ(loop.candidate_keyframe, 1);
+  EXPECT_EQ(loop.relative_inliers, 55);
   EXPECT_DOUBLE_EQ(loop.rotation_deg, 0.25);
   EXPECT_DOUBLE_EQ(loop.replay_seconds, 1.5);
 
@@ -286,9 +288,10 @@ TEST_F(EvalTest, ReconstructJsonGivesThePipelineSectionWithTheLoopClosures) {
                           "10.00 |"),
             std::string::npos)
       << md.str();
-  EXPECT_NE(md.str().find("| 1 | 100 (25) | 2 (1) | 40 | 0.400 | 2.000 | 0.250 | 1.0200 | 350 | "
-                          "1.50 |"),
-            std::string::npos)
+  EXPECT_NE(
+      md.str().find("| 1 | 100 (25) | 2 (1) | 40 | 55 | 0.400 | 2.000 | 0.250 | 1.0200 | 350 | "
+                    "1.50 |"),
+      std::string::npos)
       << md.str();
 
   // Without the CSV, reconstruct.json's own figures; a malformed file is an InputError.

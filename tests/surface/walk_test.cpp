@@ -31,6 +31,16 @@ bool SegmentCrossesTetrahedron(const Eigen::Vector3d& a, const Eigen::Vector3d& 
   return hi - lo > 1e-9;
 }
 
+// The corners of each cell.
+std::vector<std::array<Eigen::Vector3d, 4>> Tetrahedra(const DelaunayMesh& mesh,
+                                                       const std::vector<CellKey>& cells) {
+  std::vector<std::array<Eigen::Vector3d, 4>> tets;
+  for (const CellKey& c : cells)
+    tets.push_back(
+        {mesh.Position(c[0]), mesh.Position(c[1]), mesh.Position(c[2]), mesh.Position(c[3])});
+  return tets;
+}
+
 TEST(DelaunayWalk, VisitsExactlyTheCellsTheSegmentCrosses) {
   std::mt19937 rng(42);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -41,11 +51,7 @@ TEST(DelaunayWalk, VisitsExactlyTheCellsTheSegmentCrosses) {
     for (int i = 0; i < n; ++i) mesh.Insert(Eigen::Vector3d(u(rng), u(rng), u(rng)), i);
     ASSERT_TRUE(mesh.IsValid());
     const std::vector<CellKey> cells = mesh.FiniteCells();
-    std::vector<std::array<Eigen::Vector3d, 4>> tets;
-    for (const CellKey& c : cells) {
-      tets.push_back(
-          {mesh.Position(c[0]), mesh.Position(c[1]), mesh.Position(c[2]), mesh.Position(c[3])});
-    }
+    const std::vector<std::array<Eigen::Vector3d, 4>> tets = Tetrahedra(mesh, cells);
     for (int ray = 0; ray < 60; ++ray) {
       const int from = static_cast<int>(rng() % n);
       // Targets well inside the hull (the camera centres are inside the Steiner grid).
@@ -116,11 +122,7 @@ TEST(DelaunayWalk, FromCartesianGridVerticesVisitsExactlyTheCrossedCells) {
   }
   ASSERT_TRUE(mesh.IsValid());
   const std::vector<CellKey> cells = mesh.FiniteCells();
-  std::vector<std::array<Eigen::Vector3d, 4>> tets;
-  for (const CellKey& c : cells) {
-    tets.push_back(
-        {mesh.Position(c[0]), mesh.Position(c[1]), mesh.Position(c[2]), mesh.Position(c[3])});
-  }
+  const std::vector<std::array<Eigen::Vector3d, 4>> tets = Tetrahedra(mesh, cells);
   size_t rays = 0, visited = 0, from_hull = 0;
   for (int ray = 0; ray < 300; ++ray) {
     // From grid vertices (hull vertices included: their stars hold infinite cells) and points,

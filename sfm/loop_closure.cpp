@@ -237,7 +237,7 @@ LoopCloser::LoopCloser(const Rig& rig, const LoopClosureOptions& options)
 }
 
 LoopCloser::~LoopCloser() {
-  if (timings_.keyframes > 0) spdlog::info("loop closure: {}", timings_.Summary());
+  if (timings_.keyframes > 0) spdlog::debug("loop closure: {}", timings_.Summary());
 }
 
 double LoopDriftShare(const std::vector<Rigid3d>& world_from_rig, int then, int now,

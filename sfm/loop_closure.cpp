@@ -198,7 +198,7 @@ CentralRelativePoseOptions LoopClosureOptions::DefaultCentralRelativePose() {
   // focal length), and the central approximation adds offset / depth (4 cm at 10 m: 4 mrad).
   options.ransac.max_angle_error = 0.008;
   // Enough to draw an all-inlier sample of five with 99.9 % certainty at the least inlier
-  // ratio accepted (min_relative_inlier_ratio): 1 − (1 − 0.55⁵)^200 > 0.999.
+  // ratio accepted (min_relative_inlier_ratio, 0.7): 1 − (1 − 0.7⁵)^200 > 0.999 (also at 0.55).
   options.ransac.max_iterations = 200;
   return options;
 }

@@ -203,6 +203,10 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       "--untargeted-shrink", [o] { o->sculptor.targeted_shrink = false; },
       "conflict E: the several-at-once shrink tries the vertices of all of O ∩ E, not only "
       "those of the cells of O in a conflict zone");
+  command->add_flag_callback(
+      "--reference-manifold-tests", [o] { o->sculptor.reference_manifold_tests = true; },
+      "Steps 2 and 5 without the memos of failed manifold tests and the star counts (the test "
+      "reference: the same surface, slower)");
   command
       ->add_option("--ray-grid-step", o->sculptor.ray_grid_step_factor,
                    "Voxel side of the grid of old rays (paper §4.4), in units of s")

@@ -31,9 +31,53 @@ VertexHandle DelaunayMesh::Impl::AddVertex(VertexHandle v, int32_t point, bool s
   return v;
 }
 
+uint32_t DelaunayMesh::Impl::NextChange() {
+  if (++change_clock == 0) {
+    for (auto v : tri.all_vertex_handles()) v->info().changed = 0;
+    for (auto c : tri.all_cell_handles()) c->info().single_test_failed = 0;
+    ++change_epoch;
+    change_clock = 1;
+  }
+  return change_clock;
+}
+
+void DelaunayMesh::Impl::IncidentCells(VertexHandle v, std::vector<CellHandle>& cells) const {
+  // CGAL's incident_cells_3: a depth-first search through the facets containing v, cells listed
+  // when first met, with a scratch mark instead of the TDS flags, a std::stack and a copy.
+  thread_local std::vector<CellHandle> stack;
+  stack.clear();
+  const uint32_t mark = NewMark();
+  const CellHandle d = v->cell();
+  d->info().mark = mark;
+  stack.push_back(d);
+  cells.push_back(d);
+  while (!stack.empty()) {
+    const CellHandle c = stack.back();
+    stack.pop_back();
+    for (int i = 0; i < 4; ++i) {
+      if (c->vertex(i) == v) continue;
+      const CellHandle next = c->neighbor(i);
+      if (next->info().mark == mark) continue;
+      next->info().mark = mark;
+      stack.push_back(next);
+      cells.push_back(next);
+    }
+  }
+}
+
 void DelaunayMesh::Impl::SetInO(CellHandle c, bool in_o) {
   assert(!tri.is_infinite(c));
   if (c->info().in_o == in_o) return;
+  const uint32_t now = NextChange();
+  for (int i = 0; i < 4; ++i) {
+    internal::VertexInfo& v = c->vertex(i)->info();
+    v.changed = now;
+    if (in_o) {
+      ++v.o_cells;
+    } else {
+      --v.o_cells;
+    }
+  }
   for (int i = 0; i < 4; ++i) {
     const bool other = c->neighbor(i)->info().in_o;
     // The facet is in δO before the change iff other != old membership.
@@ -59,7 +103,52 @@ void DelaunayMesh::Impl::SetInO(CellHandle c, bool in_o) {
   }
 }
 
+void DelaunayMesh::Impl::UpdateDegrees(const std::vector<VertexHandle>& inserted) {
+  if (tri.dimension() < 3) {
+    degrees_valid = false;
+    return;
+  }
+  if (!degrees_valid) {
+    for (auto w : tri.all_vertex_handles()) w->info().degree = 0;
+    degrees_valid = true;
+    return;
+  }
+  // An insertion replaces the cells of its conflict zone by cells incident to the new vertex:
+  // the stars that changed are those of the vertices of the new vertex's cells (when a later
+  // insertion destroyed them, its own new cells hold those vertices again).
+  thread_local std::vector<CellHandle> star;
+  for (const VertexHandle& v : inserted) {
+    star.clear();
+    IncidentCells(v, star);
+    StarsChanged(star);
+  }
+}
+
+void DelaunayMesh::Impl::StarsChanged(const std::vector<CellHandle>& new_cells) {
+  for (const CellHandle& c : new_cells) {
+    for (int i = 0; i < 4; ++i) c->vertex(i)->info().degree = 0;
+  }
+}
+
+uint32_t DelaunayMesh::Impl::Degree(VertexHandle v) const {
+  internal::VertexInfo& info = v->info();
+  if (info.degree == 0) {  // not counted since its star changed
+    thread_local std::vector<CellHandle> star;
+    star.clear();
+    IncidentCells(v, star);
+    info.degree = static_cast<uint32_t>(star.size());
+  }
+  return info.degree;
+}
+
 bool DelaunayMesh::Impl::VertexOnSurface(VertexHandle v) const {
+  // From the counts of the star when they are kept (O ⊆ finite cells, so never the infinite
+  // vertex), otherwise by a search.
+  const internal::VertexInfo& info = v->info();
+  if (count_surface_vertices) {
+    if (info.o_cells == 0) return false;
+    if (degrees_valid) return info.o_cells < Degree(v);
+  }
   // A search of the star through the facets containing v that stops as soon as it has met a
   // cell of O and one outside (CGAL's incident_cells would collect the whole star first).
   // Visited cells carry a fresh mark (so this is not thread-safe, like any change of T).
@@ -151,9 +240,23 @@ bool DelaunayMesh::Impl::SingleCellTest(CellHandle c) const {
 bool DelaunayMesh::Impl::GeneralTest(VertexHandle v) const {
   // The v-opposite edges of the δO triangles around v, as pairs of vertex handles.
   thread_local std::vector<std::pair<VertexHandle, VertexHandle>> edges;
+  thread_local std::vector<CellHandle> star;
   edges.clear();
-  ForEachBorderTriangleAround(
-      tri, v, [](CellHandle, int, VertexHandle a, VertexHandle b) { edges.emplace_back(a, b); });
+  star.clear();
+  IncidentCells(v, star);  // ForEachBorderTriangleAround without CGAL's allocations
+  for (const CellHandle& c : star) {
+    if (!c->info().in_o) continue;
+    const int i = c->index(v);
+    for (int k = 0; k < 4; ++k) {
+      if (k == i || c->neighbor(k)->info().in_o) continue;
+      VertexHandle e[2];
+      int n = 0;
+      for (int m = 0; m < 4; ++m) {
+        if (m != i && m != k) e[n++] = c->vertex(m);
+      }
+      edges.emplace_back(e[0], e[1]);
+    }
+  }
   if (edges.empty()) return true;
   // One cycle: every vertex of the graph has degree two and a walk along the edges from any
   // vertex comes back after using all of them.
@@ -224,6 +327,7 @@ int DelaunayMesh::Insert(const Eigen::Vector3d& position, int point, bool steine
   CellHandle hint;
   if (!impl_->vertices.empty()) hint = impl_->vertices.back()->cell();
   const VertexHandle v = impl_->tri.insert(internal::ToCgal(position), hint);
+  impl_->UpdateDegrees({v});
   return impl_->AddVertex(v, point, steiner)->info().index;
 }
 

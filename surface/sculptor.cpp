@@ -92,6 +92,49 @@ double MsSince(Clock::time_point start) {
 
 using internal::CellQueue;
 
+// The order of CellQueue (by ray counter, ties in push order) with one FIFO per counter value
+// and a heap of the counters present: O(1) per cell where CellQueue sifts a heap of every cell
+// (the shrink of the ball queues all of O ∩ E). Reused: empty between passes.
+class CounterQueue {
+ public:
+  explicit CounterQueue(bool largest_first) : largest_first_(largest_first) {}
+  void Push(CellHandle c) {
+    const uint32_t k = c->info().counter;
+    if (k >= buckets_.size()) buckets_.resize(static_cast<size_t>(k) + 1);
+    Bucket& b = buckets_[k];
+    if (b.head == b.cells.size()) {  // empty: its counter joins the heap
+      b.cells.clear();
+      b.head = 0;
+      keys_.push_back(k);
+      std::push_heap(keys_.begin(), keys_.end(), Less{largest_first_});
+    }
+    b.cells.push_back(c);
+  }
+  CellHandle Pop() {
+    Bucket& b = buckets_[keys_.front()];
+    const CellHandle c = b.cells[b.head++];
+    if (b.head == b.cells.size()) {
+      std::pop_heap(keys_.begin(), keys_.end(), Less{largest_first_});
+      keys_.pop_back();
+    }
+    return c;
+  }
+  bool Empty() const { return keys_.empty(); }
+
+ private:
+  struct Bucket {
+    std::vector<CellHandle> cells;
+    size_t head = 0;
+  };
+  struct Less {  // heap order: the counter to pop first on top
+    bool largest_first;
+    bool operator()(uint32_t a, uint32_t b) const { return largest_first ? a < b : a > b; }
+  };
+  bool largest_first_;
+  std::vector<Bucket> buckets_;
+  std::vector<uint32_t> keys_;
+};
+
 struct PointRecord {
   VertexHandle vertex;
   std::vector<Eigen::Vector3d> origins;
@@ -148,8 +191,104 @@ struct IncrementalSculptor::Impl {
   internal::RayGrid ray_grid;
   uint32_t num_registered_rays = 0;
   std::vector<uint32_t> ray_seen;
+  // Scratch of TraceOldRays kept between keyframes: the border of N (rebuilt each time) and the
+  // candidate rays.
+  std::unique_ptr<internal::NewCellBorder> old_ray_border;
+  std::vector<uint32_t> old_ray_candidates;
+  // The several-at-once attempts (§4.5, §4.7) that failed in the current phase (the shrink or
+  // the growth of one keyframe), by vertex index: the attempt at v fails again while the stars
+  // it depended on are unchanged (VertexInfo::changed): that of v (the cells tried) and that of
+  // the vertex whose general test failed (`witness`; none when v was off δO or had no cell to
+  // try). `permanent`: the growth found a cell out of F in the star of v, which F keeps.
+  struct FailedAttempt {
+    uint64_t phase = 0;
+    uint32_t epoch = 0, time = 0;
+    VertexHandle witness;
+    bool permanent = false;
+  };
+  std::vector<FailedAttempt> failed_attempts;
+  uint64_t attempt_phase = 0;
+  size_t single_tests_skipped = 0, attempts_skipped = 0;  // in the current keyframe
+  CounterQueue shrink_queue{/*largest_first=*/false}, grow_queue{/*largest_first=*/true};
 
-  explicit Impl(const SculptorOptions& o) : options(o), t(*mesh.impl()) {}
+  explicit Impl(const SculptorOptions& o) : options(o), t(*mesh.impl()) {
+    t.count_surface_vertices = !options.reference_manifold_tests;
+  }
+
+  // The star of v in CGAL's incident_cells order (the reference path calls CGAL).
+  void Star(VertexHandle v, std::vector<CellHandle>& star) const {
+    if (options.reference_manifold_tests) {
+      t.tri.incident_cells(v, std::back_inserter(star));
+    } else {
+      t.IncidentCells(v, star);
+    }
+  }
+
+  // SingleCellTest(c) with the memo of its last failure (CellInfo::single_test_failed): the
+  // test reads only the side of the cells incident to the vertices of c (its facets' neighbours,
+  // the stars of its vertices and the rings of its edges), so it fails again while none of them
+  // changed side. An insertion never changes it either (§4.3: it destroys only cells out of O and
+  // the new cells around a surviving vertex or edge are out of O too).
+  bool SingleCellPasses(CellHandle c) {
+    internal::CellInfo& info = c->info();
+    if (!options.reference_manifold_tests && info.single_test_failed != 0) {
+      const uint32_t failed = info.single_test_failed;
+      bool unchanged = true;
+      for (int i = 0; i < 4 && unchanged; ++i) unchanged = c->vertex(i)->info().changed <= failed;
+      if (unchanged) {
+        ++single_tests_skipped;
+        return false;
+      }
+    }
+    if (t.SingleCellTest(c)) return true;
+    info.single_test_failed = t.change_clock;
+    return false;
+  }
+
+  // A new phase of several-at-once attempts: the failures of the previous one are forgotten.
+  void BeginAttemptPhase() { ++attempt_phase; }
+  bool KnownToFail(VertexHandle v) {
+    if (options.reference_manifold_tests) return false;
+    const size_t index = static_cast<size_t>(v->info().index);
+    if (index >= failed_attempts.size()) return false;
+    const FailedAttempt& f = failed_attempts[index];
+    if (f.phase != attempt_phase || f.epoch != t.change_epoch) return false;
+    const bool fails =
+        f.permanent || (v->info().changed <= f.time &&
+                        (f.witness == VertexHandle() || f.witness->info().changed <= f.time));
+    attempts_skipped += fails ? 1 : 0;
+    return fails;
+  }
+  void RememberFailure(VertexHandle v, VertexHandle witness, bool permanent = false) {
+    const size_t index = static_cast<size_t>(v->info().index);
+    if (index >= failed_attempts.size()) failed_attempts.resize(t.vertices.size());
+    FailedAttempt& f = failed_attempts[index];
+    f.phase = attempt_phase;
+    f.epoch = t.change_epoch;
+    f.time = t.change_clock;
+    f.witness = witness;
+    f.permanent = permanent;
+  }
+  // Flips `cells` to side in_o for a several-at-once attempt; Undo flips them back and restores
+  // the change stamps of their vertices (O is as before, so the memos of failures stay valid).
+  struct TrialFlip {
+    std::vector<std::pair<VertexHandle, uint32_t>> stamps;
+  };
+  void Flip(const std::vector<CellHandle>& cells, bool in_o, TrialFlip& trial) {
+    trial.stamps.clear();
+    for (const CellHandle& c : cells) {
+      for (int i = 0; i < 4; ++i) {
+        trial.stamps.emplace_back(c->vertex(i), c->vertex(i)->info().changed);
+      }
+    }
+    for (const CellHandle& c : cells) t.SetInO(c, in_o);
+  }
+  void Undo(const std::vector<CellHandle>& cells, bool in_o, const TrialFlip& trial) {
+    for (const CellHandle& c : cells) t.SetInO(c, !in_o);
+    for (auto it = trial.stamps.rbegin(); it != trial.stamps.rend(); ++it) {
+      it->first->info().changed = it->second;
+    }
+  }
 
   bool Active(CellHandle c) const {
     const internal::CellInfo& i = c->info();
@@ -418,7 +557,7 @@ struct IncrementalSculptor::Impl {
       for (const VertexHandle& v : frontier) {
         if (t.tri.is_infinite(v) || !seen.insert(&*v).second) continue;
         star.clear();
-        t.tri.incident_cells(v, std::back_inserter(star));
+        Star(v, star);
         for (const CellHandle& c : star) {
           if (!c->info().in_o) continue;
           if (ring + 1 < vertex_rings) {
@@ -478,7 +617,7 @@ struct IncrementalSculptor::Impl {
       extra.clear();
       for (; scanned < touched.size(); ++scanned) {
         star.clear();
-        t.tri.incident_cells(touched[scanned], std::back_inserter(star));
+        Star(touched[scanned], star);
         for (const CellHandle& c : star) {
           const internal::CellInfo& i = c->info();
           if (i.in_o || i.counter == 0 || Active(c)) continue;
@@ -494,15 +633,23 @@ struct IncrementalSculptor::Impl {
   }
 
   // ---- Shrinking (§4.2, §4.7) ----
-  void ShrinkOneAtOnce(std::vector<CellHandle> seeds) {
-    CellQueue q(/*largest_first=*/false);
+  void ShrinkOneAtOnce(const std::vector<CellHandle>& seeds) {
+    if (options.reference_manifold_tests) {
+      CellQueue q(/*largest_first=*/false);
+      ShrinkOneAtOnce(seeds, q);
+    } else {
+      ShrinkOneAtOnce(seeds, shrink_queue);
+    }
+  }
+  template <typename Queue>
+  void ShrinkOneAtOnce(const std::vector<CellHandle>& seeds, Queue& q) {
     for (const CellHandle& c : seeds) {
       if (c->info().in_o && c->info().e_stamp == stamp) q.Push(c);
     }
     while (!q.Empty()) {
       const CellHandle c = q.Pop();
       if (!c->info().in_o || !HasSurfaceFacet(c)) continue;
-      if (!t.SingleCellTest(c)) continue;
+      if (!SingleCellPasses(c)) continue;
       t.SetInO(c, false);
       for (int i = 0; i < 4; ++i) {
         const CellHandle nb = c->neighbor(i);
@@ -527,9 +674,13 @@ struct IncrementalSculptor::Impl {
     return vs;
   }
 
-  bool GeneralTestAll(const std::vector<VertexHandle>& vs) const {
+  // The general test at every vertex of vs; on failure *witness is the first that failed.
+  bool GeneralTestAll(const std::vector<VertexHandle>& vs, VertexHandle* witness) const {
     for (const VertexHandle& v : vs) {
-      if (!t.GeneralTest(v)) return false;
+      if (!t.GeneralTest(v)) {
+        *witness = v;
+        return false;
+      }
     }
     return true;
   }
@@ -538,33 +689,45 @@ struct IncrementalSculptor::Impl {
   // zone D (kConflictZones needs O ∩ D = ∅, not O ∩ E = ∅; E is where cells may leave O).
   void Shrink(const std::vector<CellHandle>& e_cells, bool only_d = false) {
     ShrinkOneAtOnce(e_cells);
-    std::vector<CellHandle> star;
+    std::vector<CellHandle> star, left, removed, next;
+    TrialFlip trial;
     for (int pass = 0; pass < options.max_vertex_passes; ++pass) {
-      std::vector<CellHandle> left;
+      left.clear();
       for (const CellHandle& c : e_cells) {
         if (c->info().in_o && (!only_d || c->info().d_stamp == stamp)) left.push_back(c);
       }
       if (left.empty()) return;
       bool progress = false;
       for (const VertexHandle& v : VerticesOf(left)) {
-        if (!t.VertexOnSurface(v)) continue;
+        // An attempt that failed in this step fails again while its stars are unchanged (the
+        // cells joining E on widening stamp their vertices as changed).
+        if (KnownToFail(v)) continue;
+        if (!t.VertexOnSurface(v)) {
+          RememberFailure(v, VertexHandle());
+          continue;
+        }
         star.clear();
-        t.tri.incident_cells(v, std::back_inserter(star));
-        std::vector<CellHandle> removed;
+        Star(v, star);
+        removed.clear();
         for (const CellHandle& c : star) {
           if (c->info().in_o && c->info().e_stamp == stamp) removed.push_back(c);
         }
-        if (removed.empty()) continue;
-        for (const CellHandle& c : removed) t.SetInO(c, false);
-        if (GeneralTestAll(VerticesOf(removed))) {
+        if (removed.empty()) {
+          RememberFailure(v, VertexHandle());
+          continue;
+        }
+        Flip(removed, false, trial);
+        VertexHandle witness;
+        if (GeneralTestAll(VerticesOf(removed), &witness)) {
           progress = true;
-          std::vector<CellHandle> next;
+          next.clear();
           for (const CellHandle& c : removed) {
             for (int i = 0; i < 4; ++i) next.push_back(c->neighbor(i));
           }
           ShrinkOneAtOnce(next);
         } else {
-          for (const CellHandle& c : removed) t.SetInO(c, true);
+          Undo(removed, false, trial);
+          RememberFailure(v, witness);
         }
       }
       if (!progress) return;
@@ -573,7 +736,15 @@ struct IncrementalSculptor::Impl {
 
   // ---- Growing (§4.5) ----
   void GrowOneAtOnce(const std::vector<CellHandle>& seeds, bool allow_isolated_seed) {
-    CellQueue q(/*largest_first=*/true);
+    if (options.reference_manifold_tests) {
+      CellQueue q(/*largest_first=*/true);
+      GrowOneAtOnce(seeds, allow_isolated_seed, q);
+    } else {
+      GrowOneAtOnce(seeds, allow_isolated_seed, grow_queue);
+    }
+  }
+  template <typename Queue>
+  void GrowOneAtOnce(const std::vector<CellHandle>& seeds, bool allow_isolated_seed, Queue& q) {
     for (const CellHandle& c : seeds) {
       if (!c->info().in_o && c->info().counter > 0 && !t.tri.is_infinite(c)) q.Push(c);
     }
@@ -581,7 +752,7 @@ struct IncrementalSculptor::Impl {
       const CellHandle c = q.Pop();
       if (c->info().in_o) continue;
       if (!HasSurfaceFacet(c) && !allow_isolated_seed) continue;
-      if (!t.SingleCellTest(c)) continue;
+      if (!SingleCellPasses(c)) continue;
       allow_isolated_seed = false;
       t.SetInO(c, true);
       for (int i = 0; i < 4; ++i) {
@@ -606,7 +777,8 @@ struct IncrementalSculptor::Impl {
     } else {
       GrowOneAtOnce(seeds, false);
     }
-    std::vector<CellHandle> star, free;
+    std::vector<CellHandle> star, free, added, next;
+    TrialFlip trial;
     for (int pass = 0; pass < options.max_vertex_passes; ++pass) {
       bool progress = false;
       // Only a vertex of a cell of F \ O can have cells to add, and F does not change while O
@@ -616,10 +788,16 @@ struct IncrementalSculptor::Impl {
         if (!c->info().in_o && c->info().counter > 0) free.push_back(c);
       }
       for (const VertexHandle& v : VerticesOf(free)) {
-        if (!t.VertexOnSurface(v)) continue;
+        // F is fixed during the growth: an attempt that failed in this step fails again while
+        // its stars are unchanged, and always when the star of v leaves F.
+        if (KnownToFail(v)) continue;
+        if (!t.VertexOnSurface(v)) {
+          RememberFailure(v, VertexHandle());
+          continue;
+        }
         star.clear();
-        t.tri.incident_cells(v, std::back_inserter(star));
-        std::vector<CellHandle> added;
+        Star(v, star);
+        added.clear();
         bool all_free = true;
         for (const CellHandle& c : star) {
           if (t.tri.is_infinite(c) || c->info().counter == 0) {
@@ -628,17 +806,22 @@ struct IncrementalSculptor::Impl {
           }
           if (!c->info().in_o) added.push_back(c);
         }
-        if (!all_free || added.empty()) continue;
-        for (const CellHandle& c : added) t.SetInO(c, true);
-        if (GeneralTestAll(VerticesOf(added))) {
+        if (!all_free || added.empty()) {
+          RememberFailure(v, VertexHandle(), /*permanent=*/!all_free);
+          continue;
+        }
+        Flip(added, true, trial);
+        VertexHandle witness;
+        if (GeneralTestAll(VerticesOf(added), &witness)) {
           progress = true;
-          std::vector<CellHandle> next;
+          next.clear();
           for (const CellHandle& c : added) {
             for (int i = 0; i < 4; ++i) next.push_back(c->neighbor(i));
           }
           GrowOneAtOnce(next, false);
         } else {
-          for (const CellHandle& c : added) t.SetInO(c, false);
+          Undo(added, true, trial);
+          RememberFailure(v, witness);
         }
       }
       if (!progress) return;
@@ -693,8 +876,9 @@ struct IncrementalSculptor::Impl {
     if (n_cells.empty() || num_registered_rays == 0) return;
     const auto tick = Clock::now();
     const uint32_t date = stamp;
-    std::vector<uint32_t> candidates;
-    std::unique_ptr<internal::NewCellBorder> border;
+    std::vector<uint32_t>& candidates = old_ray_candidates;
+    candidates.clear();
+    internal::NewCellBorder* border = nullptr;
     for (const CellHandle& c : n_cells) {
       for (int i = 0; i < 4; ++i) {
         const VertexHandle v = c->vertex(i);
@@ -706,7 +890,11 @@ struct IncrementalSculptor::Impl {
       candidates.resize(num_registered_rays);
       for (uint32_t id = 0; id < num_registered_rays; ++id) candidates[id] = id;
     } else {
-      border = std::make_unique<internal::NewCellBorder>(t.tri, n_cells, date, ray_grid.grid());
+      if (!old_ray_border) {
+        old_ray_border = std::make_unique<internal::NewCellBorder>(t.tri, ray_grid.grid());
+      }
+      border = old_ray_border.get();
+      border->Build(n_cells, date);
       ray_seen.resize(num_registered_rays, 0);
       auto add = [&](uint32_t id) {
         if (id < num_registered_rays && ray_seen[id] != date) {
@@ -797,6 +985,8 @@ struct IncrementalSculptor::Impl {
   }
 
   void FinishStats(KeyframeStats& st) const {
+    st.single_tests_skipped = single_tests_skipped;
+    st.attempts_skipped = attempts_skipped;
     st.cells_t = t.tri.number_of_finite_cells();
     st.cells_f = t.num_f;
     st.cells_o = t.num_o;
@@ -828,10 +1018,12 @@ struct IncrementalSculptor::Impl {
     KeyframeStats st;
     st.keyframe = kf.id;
     st.points_in = kf.points.size();
+    single_tests_skipped = attempts_skipped = 0;
     const std::vector<const SurfacePoint*> kept = Filter(kf, st);
 
     auto tick = Clock::now();
     st.steiner_added = MaterialiseGrid(kf.centre);
+    t.UpdateDegrees(new_vertices);  // the stars the manifold tests count (VertexOnSurface)
     st.ms_steiner = MsSince(tick);
 
     // Step 1: E = cells in B_{r+l}(c_{t+1}), or the conflict zones of the points plus a margin.
@@ -849,6 +1041,7 @@ struct IncrementalSculptor::Impl {
     // shrink again.
     tick = Clock::now();
     std::vector<CellHandle> e_all = e_cells;
+    BeginAttemptPhase();
     const bool only_d =
         options.enclosing == EnclosingMode::kConflictZones && options.targeted_shrink;
     Shrink(e_all, only_d);
@@ -875,6 +1068,11 @@ struct IncrementalSculptor::Impl {
         ++st.enclose_rounds;
         if (added.empty()) continue;
         st.cells_e_added += added.size();
+        // The stars of their vertices changed for the shrink (more cells of E to remove).
+        const uint32_t now = t.NextChange();
+        for (const CellHandle& c : added) {
+          for (int i = 0; i < 4; ++i) c->vertex(i)->info().changed = now;
+        }
         e_all.insert(e_all.end(), added.begin(), added.end());
         Shrink(e_all, only_d);
         left = o_in_d();
@@ -912,6 +1110,7 @@ struct IncrementalSculptor::Impl {
       AddPoint(*p, v, rec);
       ++st.points_added;
     }
+    t.UpdateDegrees(new_vertices);  // the stars the manifold tests count (VertexOnSurface)
     const std::vector<CellHandle> n_cells = NewCells();
     st.cells_n = n_cells.size();
     st.ms_insert = MsSince(tick);
@@ -934,6 +1133,7 @@ struct IncrementalSculptor::Impl {
     tick = Clock::now();
     if (options.enclosing == EnclosingMode::kBall) surviving = CellsInBall(kf.centre, r + l);
     std::vector<CellHandle> active = ActiveCells(n_cells, surviving);
+    BeginAttemptPhase();
     Grow(active);
     if (options.enclosing == EnclosingMode::kConflictZones) GrowAroundChanges(active, st);
     st.cells_active = active.size();
@@ -964,6 +1164,7 @@ struct IncrementalSculptor::Impl {
     new_vertices.clear();
     KeyframeStats st;
     st.batch = true;
+    single_tests_skipped = attempts_skipped = 0;
     st.keyframe = kfs.back().id;
     auto tick = Clock::now();
     for (const SurfaceKeyframe& kf : kfs) st.steiner_added += MaterialiseGrid(kf.centre);
@@ -989,6 +1190,7 @@ struct IncrementalSculptor::Impl {
       }
       keyframes.push_back(std::move(rec));
     }
+    t.UpdateDegrees(new_vertices);
     std::vector<CellHandle> all;
     for (auto c : t.tri.finite_cell_handles()) {
       c->info().date = stamp;
@@ -1007,6 +1209,7 @@ struct IncrementalSculptor::Impl {
     for (const KeyframeRecord& kf : keyframes) RegisterRays(kf);
     st.ms_rays = MsSince(tick);
     tick = Clock::now();
+    BeginAttemptPhase();
     Grow(all);
     st.ms_grow = MsSince(tick);
     PostProcess(all, nullptr, kfs.back().centre, std::numeric_limits<double>::infinity(),
@@ -1117,6 +1320,25 @@ std::string IncrementalSculptor::CheckInvariants(bool check_triangulation) const
   if (f != m.t.num_f) problems << "|F| " << m.t.num_f << " != recount " << f << "; ";
   if (triangles != m.t.num_triangles) {
     problems << "|δO| " << m.t.num_triangles << " != recount " << triangles << "; ";
+  }
+  // The star counts of VertexOnSurface (VertexInfo::o_cells, degree) against recounts.
+  if (tri.dimension() == 3) {
+    std::unordered_map<const void*, std::pair<uint32_t, uint32_t>> counts;  // o_cells, degree
+    for (auto c : tri.all_cell_handles()) {
+      for (int i = 0; i < 4; ++i) {
+        auto& k = counts[&*c->vertex(i)];
+        k.first += c->info().in_o ? 1 : 0;
+        ++k.second;
+      }
+    }
+    size_t wrong_o = 0, wrong_degree = 0;
+    for (auto v : tri.finite_vertex_handles()) {
+      const auto& k = counts[&*v];
+      wrong_o += v->info().o_cells != k.first;
+      wrong_degree += m.t.degrees_valid && m.t.Degree(v) != k.second;
+    }
+    if (wrong_o) problems << wrong_o << " vertices with a wrong count of cells of O; ";
+    if (wrong_degree) problems << wrong_degree << " vertices with a wrong degree; ";
   }
   return problems.str();
 }

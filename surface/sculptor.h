@@ -158,6 +158,9 @@ struct SculptorOptions {
   // the conflict-zone search, and the insertions that meet O are counted
   // (KeyframeStats::insertions_meeting_o). Costs O(|O|) per point.
   bool verify_insertions = false;
+  // Test reference for steps 2 and 5: no memo of failed manifold tests (a failed subtraction or
+  // addition test, a failed several-at-once attempt), CGAL's incident_cells. Same O, slower.
+  bool reference_manifold_tests = false;
   // Step 6 (paper §4.6).
   GenusRefinementOptions genus;
   SmoothingOptions smoothing;
@@ -212,6 +215,10 @@ struct KeyframeStats {
   // With SculptorOptions::verify_insertions: points inserted although their conflict zone met O
   // (must be 0, §4.3). Not in the CSV row.
   size_t insertions_meeting_o = 0;
+  // Steps 2 and 5: manifold tests not run again because they had failed on unchanged stars
+  // (subtraction/addition tests, several-at-once attempts; 0 with reference_manifold_tests).
+  // Not in the CSV row.
+  size_t single_tests_skipped = 0, attempts_skipped = 0;
 };
 
 std::string KeyframeStatsCsvHeader();

@@ -26,6 +26,14 @@ struct VertexInfo {
   int32_t point = -1;    // caller's point index; -1 for Steiner vertices
   bool steiner = false;  // a vertex of the Steiner grid (paper §3.3)
   uint32_t touched = 0;  // equal to DelaunayMesh::Impl::touch_stamp when recorded in `touched`
+  // DelaunayMesh::Impl::change_clock when a cell of the star last changed side (SetInO): the
+  // manifold tests at and around the vertex give what they gave before while it is unchanged.
+  uint32_t changed = 0;
+  // Cells of O incident to the vertex (kept by SetInO) and all cells incident to it (0: to be
+  // counted again, see DelaunayMesh::Impl::UpdateDegrees): the vertex is on δO iff
+  // 0 < o_cells < degree (VertexOnSurface).
+  uint32_t o_cells = 0;
+  uint32_t degree = 0;
 };
 
 struct CellInfo {
@@ -37,6 +45,9 @@ struct CellInfo {
   uint32_t mark = 0;       // scratch visit mark of searches (DelaunayMesh::Impl::NewMark)
   bool in_o = false;       // the cell is in O (free space carved so far, O ⊆ F)
   bool queued = false;     // scratch flag of the priority-queue passes
+  // The change_clock value at which SingleCellTest last failed on this cell (0: never): it fails
+  // again while no vertex of the cell has changed since (VertexInfo::changed).
+  uint32_t single_test_failed = 0;
 };
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
@@ -103,6 +114,26 @@ struct DelaunayMesh::Impl {
   // the vertices whose δO umbrella may have changed (step 6 smoothing works on them).
   std::vector<internal::VertexHandle>* touched = nullptr;
   uint32_t touch_stamp = 0;
+
+  // Counts the changes of side of cells (SetInO), stamped on their vertices (VertexInfo::changed)
+  // for the memos of failed manifold tests. On wrap-around every stamp and memo is cleared and
+  // change_epoch advances (memos kept elsewhere compare it).
+  uint32_t change_clock = 0;
+  uint32_t change_epoch = 0;
+  uint32_t NextChange();
+  // The cells incident to v (v finite, dimension 3) in the order of CGAL's incident_cells,
+  // without its allocations (a scratch mark per cell, see NewMark).
+  void IncidentCells(internal::VertexHandle v, std::vector<internal::CellHandle>& cells) const;
+  // VertexInfo::degree after insertions: the degrees of the vertices of the cells incident to
+  // the `inserted` vertices (an insertion changes only those stars) are to be counted again
+  // (lazily, by Degree), or those of all vertices when they were not kept. Whoever inserts into
+  // `tri` calls it (or StarsChanged with all the new cells) before the next manifold test; in
+  // dimension < 3 VertexOnSurface searches the star.
+  bool degrees_valid = false;
+  bool count_surface_vertices = true;  // false: VertexOnSurface always searches (test reference)
+  void UpdateDegrees(const std::vector<internal::VertexHandle>& inserted);
+  void StarsChanged(const std::vector<internal::CellHandle>& new_cells);
+  uint32_t Degree(internal::VertexHandle v) const;
 
   internal::VertexHandle AddVertex(internal::VertexHandle v, int32_t point, bool steiner);
 

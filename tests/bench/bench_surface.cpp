@@ -76,6 +76,10 @@ void BM_Sculpt(benchmark::State& state) {
     if (std::string(mode) == "whole") options.old_rays = OldRayTracing::kWholeWalks;
     if (std::string(mode) == "all") options.old_rays = OldRayTracing::kAllRays;
   }
+  // OMNI_BENCH_REFERENCE_MANIFOLD=1: steps 2 and 5 without the memos of failed manifold tests
+  // and the star counts (the same surface, slower).
+  if (const char* reference = std::getenv("OMNI_BENCH_REFERENCE_MANIFOLD"))
+    options.reference_manifold_tests = std::string(reference) == "1";
   std::vector<KeyframeStats> stats;
   TriangleMesh mesh;
   for (auto _ : state) {

@@ -244,19 +244,8 @@ bool DelaunayMesh::Impl::GeneralTest(VertexHandle v) const {
   edges.clear();
   star.clear();
   IncidentCells(v, star);  // ForEachBorderTriangleAround without CGAL's allocations
-  for (const CellHandle& c : star) {
-    if (!c->info().in_o) continue;
-    const int i = c->index(v);
-    for (int k = 0; k < 4; ++k) {
-      if (k == i || c->neighbor(k)->info().in_o) continue;
-      VertexHandle e[2];
-      int n = 0;
-      for (int m = 0; m < 4; ++m) {
-        if (m != i && m != k) e[n++] = c->vertex(m);
-      }
-      edges.emplace_back(e[0], e[1]);
-    }
-  }
+  internal::ForEachBorderTriangleIn(
+      star, v, [&](CellHandle, int, VertexHandle a, VertexHandle b) { edges.emplace_back(a, b); });
   if (edges.empty()) return true;
   // One cycle: every vertex of the graph has degree two and a walk along the edges from any
   // vertex comes back after using all of them.

@@ -277,6 +277,16 @@ struct NewCellBorder::Query {
   Eigen::Vector3d a, b, ab;  // from, target, target − from in doubles
   double length;             // ‖ab‖
   double extent;             // largest coordinate magnitude of a and b
+
+  Query(VertexHandle from_vertex_, const Point& target_)
+      : from_vertex(from_vertex_),
+        from(&from_vertex_->point()),
+        target(&target_),
+        a(ToEigen(*from)),
+        b(ToEigen(target_)),
+        ab(b - a),
+        length(ab.norm()),
+        extent(std::max(a.cwiseAbs().maxCoeff(), b.cwiseAbs().maxCoeff())) {}
 };
 
 NewCellBorder::Test NewCellBorder::TestFacet(uint32_t id, const Query& q) const {
@@ -330,15 +340,7 @@ bool NewCellBorder::Entries(VertexHandle from_vertex, const Point& target,
                             std::vector<CellFacet>* entries) const {
   entries->clear();
   if (facets_.empty()) return true;
-  Query q;
-  q.from_vertex = from_vertex;
-  q.from = &from_vertex->point();
-  q.target = &target;
-  q.a = ToEigen(*q.from);
-  q.b = ToEigen(target);
-  q.ab = q.b - q.a;
-  q.length = q.ab.norm();
-  q.extent = std::max(q.a.cwiseAbs().maxCoeff(), q.b.cwiseAbs().maxCoeff());
+  const Query q(from_vertex, target);
 
   // The part of the segment in the box of the blocks, grown by a fine voxel: a crossing point
   // lies in a facet's box, at least that far inside, far beyond the rounding of the clipping.
@@ -438,15 +440,7 @@ bool NewCellBorder::Entries(VertexHandle from_vertex, const Point& target,
 bool NewCellBorder::EntriesBruteForce(VertexHandle from_vertex, const Point& target,
                                       std::vector<CellFacet>* entries) const {
   entries->clear();
-  Query q;
-  q.from_vertex = from_vertex;
-  q.from = &from_vertex->point();
-  q.target = &target;
-  q.a = ToEigen(*q.from);
-  q.b = ToEigen(target);
-  q.ab = q.b - q.a;
-  q.length = q.ab.norm();
-  q.extent = std::max(q.a.cwiseAbs().maxCoeff(), q.b.cwiseAbs().maxCoeff());
+  const Query q(from_vertex, target);
   for (uint32_t id = 0; id < facets_.size(); ++id) {
     switch (TestFacet(id, q)) {
       case Test::kMiss:

@@ -63,14 +63,12 @@ using CellHandle = Delaunay::Cell_handle;
 inline Point ToCgal(const Eigen::Vector3d& p) { return Point(p.x(), p.y(), p.z()); }
 inline Eigen::Vector3d ToEigen(const Point& p) { return Eigen::Vector3d(p.x(), p.y(), p.z()); }
 
-// Calls visit(cell, k, a, b) for each δO triangle around v: facet k of a cell of O incident to v
-// whose neighbour across it is outside O; a and b are the facet's vertices other than v (its
-// v-opposite edge), in the cell's vertex order.
+// Calls visit(cell, k, a, b) for each δO triangle around v among the cells of `star` (v's star,
+// or part of it): facet k of a cell of O incident to v whose neighbour across it is outside O;
+// a and b are the facet's vertices other than v (its v-opposite edge), in the cell's vertex
+// order.
 template <class Visit>
-void ForEachBorderTriangleAround(const Delaunay& tri, VertexHandle v, Visit&& visit) {
-  thread_local std::vector<CellHandle> star;
-  star.clear();
-  tri.incident_cells(v, std::back_inserter(star));
+void ForEachBorderTriangleIn(const std::vector<CellHandle>& star, VertexHandle v, Visit&& visit) {
   for (const CellHandle& c : star) {
     if (!c->info().in_o) continue;
     const int i = c->index(v);
@@ -84,6 +82,16 @@ void ForEachBorderTriangleAround(const Delaunay& tri, VertexHandle v, Visit&& vi
       visit(c, k, e[0], e[1]);
     }
   }
+}
+
+// The same around v, its star found by CGAL (DelaunayMesh::Impl::IncidentCells finds it without
+// allocations where the Impl is at hand).
+template <class Visit>
+void ForEachBorderTriangleAround(const Delaunay& tri, VertexHandle v, Visit&& visit) {
+  thread_local std::vector<CellHandle> star;
+  star.clear();
+  tri.incident_cells(v, std::back_inserter(star));
+  ForEachBorderTriangleIn(star, v, std::forward<Visit>(visit));
 }
 
 }  // namespace omni::internal

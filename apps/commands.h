@@ -5,8 +5,11 @@
 // InputError on bad input and returns through CommandResult.
 
 #include <CLI/CLI.hpp>
+#include <string>
 
 namespace omni {
+
+struct SculptorOptions;
 
 // Options every subcommand shares.
 struct GlobalOptions {
@@ -24,5 +27,11 @@ void RegisterEvalCommands(CLI::App& app, const GlobalOptions& global);
 void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global);
+
+// The enclosing-set options of the surface that `surface` and `reconstruct` both take
+// (--enclosing ball|conflict and the tuning of conflict), registered on `command`;
+// ApplyEnclosingOption sets sculptor->enclosing from the --enclosing value (InputError if bad).
+void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOptions* sculptor);
+void ApplyEnclosingOption(const std::string& enclosing, SculptorOptions* sculptor);
 
 }  // namespace omni

@@ -47,6 +47,7 @@ struct ReconstructCommandOptions {
   bool non_central = false;
   double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
   std::string loop_replay = "batch";
+  std::string enclosing = "ball";  // the surface's enclosing set (--enclosing)
   PipelineOptions pipeline;
 };
 
@@ -125,6 +126,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
   } else {
     throw InputError("", "--loop-replay", "expected batch or incremental");
   }
+  ApplyEnclosingOption(o.enclosing, &o.pipeline.sculptor);
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
   o.pipeline.tracker.central = o.central ? true : o.non_central ? false : rig.central;
@@ -270,6 +272,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
   summary["loop_closures"] = loops;
   summary["surface_replay_seconds"] = result.replay_seconds;
   summary["loop_replay"] = o.loop_replay;
+  summary["enclosing"] = o.enclosing;
   summary["prefetch_frames_ahead"] = o.pipeline.prefetch.frames_ahead;
   summary["point_colors_seconds"] = color_stats.seconds;
   WriteTextFileAtomically(partial / kSummaryFile, summary.dump(2) + "\n");
@@ -338,6 +341,7 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
                    "Surface after a loop closure: batch (the corrected keyframes sculpted at "
                    "once) or incremental (one by one from scratch)")
       ->capture_default_str();
+  AddEnclosingOptions(command, &o->enclosing, &o->pipeline.sculptor);
   command
       ->add_option("--prefetch", o->pipeline.prefetch.frames_ahead,
                    "Frames whose images are decoded ahead of the SfM")

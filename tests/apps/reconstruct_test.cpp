@@ -111,6 +111,12 @@ TEST(ReconstructCommand, RefusesAMissingOutAndABadDrive) {
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_FALSE(fs::exists(scratch / "out"));
   EXPECT_FALSE(fs::exists(scratch / "out.incomplete"));
+  const auto enclosing = RunOmnisculpt({"reconstruct", (scratch / "nothing").string(), "--out",
+                                        (scratch / "out").string(), "--enclosing", "cube"},
+                                       scratch);
+  EXPECT_EQ(enclosing.exit_code, 2);
+  EXPECT_NE(enclosing.err.find("--enclosing"), std::string::npos) << enclosing.err;
+  EXPECT_FALSE(fs::exists(scratch / "out.incomplete"));
 }
 
 // A drive with the first `frames` frames of the short drive (images linked, not copied).
@@ -278,6 +284,35 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
                 .exit_code,
             2);
   EXPECT_EQ(ReadTextFile(mine / "notes.txt"), "keep me\n");
+}
+
+TEST(ReconstructShortDrive, TheConflictZoneEnclosingSetGivesAManifoldToo) {
+  // --enclosing conflict (the paper's future work, §6) through the whole pipeline, loop
+  // closure and batch replay included.
+  const fs::path scratch = ScratchDir("enclosing_conflict");
+  const fs::path drive(OMNI_SHORT_DRIVE_DIR);
+  const fs::path out = scratch / "rec";
+  const auto result = RunOmnisculpt(
+      {"--quiet", "reconstruct", drive.string(), "--out", out.string(), "--enclosing", "conflict"},
+      scratch);
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  const nlohmann::json summary = nlohmann::json::parse(ReadTextFile(out / "reconstruct.json"));
+  EXPECT_EQ(summary["enclosing"].get<std::string>(), "conflict");
+  EXPECT_TRUE(summary["manifold"].get<bool>());
+  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
+  EXPECT_GT(mesh.triangles.size(), 1000u);
+  const MeshCheckReport check = CheckMesh(mesh);
+  EXPECT_TRUE(check.ok) << check.ToText();
+  // The tight set is what the keyframes used: its widening columns are filled.
+  const std::vector<std::string> rows = SplitText(ReadTextFile(out / "stats" / "keyframes.csv"));
+  const std::vector<std::string> header = SplitText(rows.at(0), ',');
+  const size_t rounds = std::find(header.begin(), header.end(), "enclose_rounds") - header.begin();
+  ASSERT_LT(rounds, header.size()) << rows[0];
+  int widened = 0;
+  for (size_t r = 1; r < rows.size(); ++r) {
+    widened += std::stoi(SplitText(rows[r], ',').at(rounds)) > 0 ? 1 : 0;
+  }
+  EXPECT_GT(widened, 0);
 }
 
 TEST(ReconstructShortDrive, AKilledRunLeavesNothingThatLooksComplete) {

@@ -424,7 +424,7 @@ TEST(ReconstructShortDrive, LoopClosureLowersThePoseErrorAndTheLoopMeets) {
       0u);
 
   // After the closure (pose graph, fused loop points, global adjustment) the trajectory is
-  // more accurate and the start and end of the loop meet better than without it.
+  // more accurate than without it, and the start and end of the loop meet.
   const double rms_with = PoseRms(with, drive), rms_without = PoseRms(without, drive);
   const double gap_with = LoopGap(with, drive), gap_without = LoopGap(without, drive);
   std::printf(
@@ -432,9 +432,11 @@ TEST(ReconstructShortDrive, LoopClosureLowersThePoseErrorAndTheLoopMeets) {
       "%.3f m\n",
       rms_without, rms_with, gap_without, gap_with);
   EXPECT_LT(rms_with, rms_without);
-  EXPECT_LT(gap_with, gap_without);
   EXPECT_LT(rms_with, 0.25);
-  EXPECT_LT(gap_with, 0.5);
+  // The short drive drifts little: over runs the start-end gap was 6 to 17 cm without the
+  // closure and 3 to 6 cm with it, so comparing the two gaps is within the SfM's run-to-run
+  // noise (it failed once that way); the gap with the closure must be small in itself.
+  EXPECT_LT(gap_with, 0.1);
 
   // The final surface is the corrected map's: a replay row in the stats, and a manifold.
   const std::vector<std::string> rows = SplitText(ReadTextFile(with / "stats" / "keyframes.csv"));

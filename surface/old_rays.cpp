@@ -31,7 +31,8 @@ NewCellBorder::NewCellBorder(const Delaunay& tri, const std::vector<CellHandle>&
 NewCellBorder::NewCellBorder(const Delaunay& tri, const VoxelGrid& grid, int subdivision)
     : tri_(tri), grid_(grid), subdivision_asked_(subdivision) {}
 
-void NewCellBorder::Build(const std::vector<CellHandle>& n_cells, uint32_t date) {
+void NewCellBorder::Build(const std::vector<CellHandle>& n_cells, uint32_t date,
+                          bool only_crossed) {
   const Delaunay& tri = tri_;
   const VoxelGrid& grid = grid_;
   // Every buffer is cleared, its memory kept for the next keyframe (fresh large allocations
@@ -39,6 +40,7 @@ void NewCellBorder::Build(const std::vector<CellHandle>& n_cells, uint32_t date)
   facets_.clear();
   facet_of_.clear();
   keys_.clear();
+  uncrossed_ = 0;
   first_.clear();
   ids_.clear();
   block_first_.clear();
@@ -59,6 +61,10 @@ void NewCellBorder::Build(const std::vector<CellHandle>& n_cells, uint32_t date)
     for (int k = 0; k < 4; ++k) {
       const CellHandle nb = c->neighbor(k);
       if (nb->info().date == date || tri.is_infinite(nb)) continue;
+      if (only_crossed && nb->info().counter == 0) {
+        ++uncrossed_;
+        continue;
+      }
       FacetOf of;
       of.cell = c;
       of.index = k;

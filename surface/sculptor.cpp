@@ -894,7 +894,9 @@ struct IncrementalSculptor::Impl {
         old_ray_border = std::make_unique<internal::NewCellBorder>(t.tri, ray_grid.grid());
       }
       border = old_ray_border.get();
-      border->Build(n_cells, date);
+      border->Build(n_cells, date, /*only_crossed=*/true);
+      st.old_ray_facets = border->NumFacets();
+      st.old_ray_facets_uncrossed = border->NumUncrossed();
       ray_seen.resize(num_registered_rays, 0);
       auto add = [&](uint32_t id) {
         if (id < num_registered_rays && ray_seen[id] != date) {

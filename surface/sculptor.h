@@ -204,6 +204,9 @@ struct KeyframeStats {
   // (‖p − c_t‖ > 15 s), aperture (no two rays more than 10° apart).
   size_t points_invalid = 0, points_filtered_ground = 0, points_filtered_length = 0,
          points_filtered_aperture = 0;
+  // The border facets of N indexed for the old rays, and those left out because no ray crossed
+  // the cell outside them (NewCellBorder::Build). Not in the CSV row.
+  size_t old_ray_facets = 0, old_ray_facets_uncrossed = 0;
   // kConflictZones: widening rounds of E done after the first shrink, and the cells they added.
   size_t enclose_rounds = 0, cells_e_added = 0;
   // kConflictZones: cells of F \ O added to the growth region around the changes of δO

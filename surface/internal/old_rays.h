@@ -99,7 +99,15 @@ class NewCellBorder {
                 const VoxelGrid& grid, int subdivision = kDefaultSubdivision);
   // Empty; Build makes it the border of N (again for each keyframe, reusing its memory).
   NewCellBorder(const Delaunay& tri, const VoxelGrid& grid, int subdivision = kDefaultSubdivision);
-  void Build(const std::vector<CellHandle>& n_cells, uint32_t date);
+  // only_crossed: leaves out the facets whose outer cell (not in N) has a zero ray counter. An
+  // old ray (traced before the keyframe) that enters N through a facet crosses the cell outside
+  // it first, which its walk counted, so none enters through those. Exact as far as the walks
+  // are (a ray through an edge or a vertex of T follows the same cells each time it is walked
+  // from the same cell; OldRayTracingGivesTheBruteForceCountersOnARandomStream checks it with
+  // points on common planes).
+  void Build(const std::vector<CellHandle>& n_cells, uint32_t date, bool only_crossed = false);
+  // Border facets left out by only_crossed in the last Build (their outer cell uncrossed).
+  size_t NumUncrossed() const { return uncrossed_; }
   // Keys of the voxels of `grid` that a border facet touches (a superset).
   const std::vector<uint64_t>& voxels() const { return keys_; }
   size_t NumFacets() const { return facets_.size(); }
@@ -153,6 +161,7 @@ class NewCellBorder {
   const Delaunay& tri_;
   const VoxelGrid& grid_;
   int subdivision_asked_;
+  size_t uncrossed_ = 0;
   std::vector<Facet> facets_;
   std::vector<FacetOf> facet_of_;
   std::vector<uint64_t> keys_;

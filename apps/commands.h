@@ -10,6 +10,7 @@
 namespace omni {
 
 struct SculptorOptions;
+enum class EnclosingMode;
 
 // Options every subcommand shares.
 struct GlobalOptions {
@@ -33,5 +34,7 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global);
 // ApplyEnclosingOption sets sculptor->enclosing from the --enclosing value (InputError if bad).
 void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOptions* sculptor);
 void ApplyEnclosingOption(const std::string& enclosing, SculptorOptions* sculptor);
+// The --enclosing value of a mode ("ball" or "conflict").
+std::string EnclosingName(EnclosingMode mode);
 
 }  // namespace omni

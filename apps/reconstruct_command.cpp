@@ -47,7 +47,8 @@ struct ReconstructCommandOptions {
   bool non_central = false;
   double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
   std::string loop_replay = "batch";
-  std::string enclosing = "ball";  // the surface's enclosing set (--enclosing)
+  // The surface's enclosing set (--enclosing).
+  std::string enclosing = EnclosingName(SculptorOptions().enclosing);
   PipelineOptions pipeline;
 };
 

@@ -115,7 +115,10 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
                                             field("points_filtered_aperture"));
     EXPECT_LE(field("cells_o"), field("cells_f"));
     EXPECT_LE(field("cells_f"), field("cells_t"));
-    EXPECT_GT(field("cells_e"), 0.0);
+    // E (the default: the new points' conflict zones) is empty only without points.
+    if (field("points_added") > 0) {
+      EXPECT_GT(field("cells_e"), 0.0);
+    }
     EXPECT_GE(field("ms_total"), field("ms_rays"));
     added += static_cast<long>(field("points_added"));
     rejected += static_cast<long>(field("points_rejected"));

@@ -28,14 +28,17 @@ struct TightRun {
   }
 };
 
-// Sculpts the drive in the tight mode (the first 10 keyframes in one batch, s measured = 1),
-// checking δO and O ⊆ F after every keyframe when `check` is set.
+// Sculpts the drive in the tight mode with `rounds` widening rounds, or with the ball when
+// rounds < 0 (the first 10 keyframes in one batch, s measured = 1), checking δO and O ⊆ F after
+// every keyframe when `check` is set.
 TightRun RunTight(const std::vector<SurfaceKeyframe>& drive, int rounds, bool check,
                   SculptorOptions options = {}) {
   options.init_keyframes = 10;
   if (rounds >= 0) {
     options.enclosing = EnclosingMode::kConflictZones;
     options.enclosing_rounds = rounds;
+  } else {
+    options.enclosing = EnclosingMode::kBall;
   }
   options.verify_insertions = check;
   IncrementalSculptor sculptor(options);

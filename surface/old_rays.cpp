@@ -33,8 +33,13 @@ NewCellBorder::NewCellBorder(const Delaunay& tri, const VoxelGrid& grid, int sub
 
 void NewCellBorder::Build(const std::vector<CellHandle>& n_cells, uint32_t date,
                           bool only_crossed) {
+  Collect(n_cells, date, only_crossed);
+  Index();
+}
+
+void NewCellBorder::Collect(const std::vector<CellHandle>& n_cells, uint32_t date,
+                            bool only_crossed) {
   const Delaunay& tri = tri_;
-  const VoxelGrid& grid = grid_;
   // Every buffer is cleared, its memory kept for the next keyframe (fresh large allocations
   // cost page faults).
   facets_.clear();
@@ -49,14 +54,8 @@ void NewCellBorder::Build(const std::vector<CellHandle>& n_cells, uint32_t date,
   size_.setZero();
   std::vector<Eigen::AlignedBox3d>& boxes = scratch_.boxes;
   boxes.clear();
-  const double step = grid.step();
-  // Voxels within this distance of a facet are registered too, far above the rounding of the
-  // voxel walks (which may skip a voxel that a segment grazes at an edge or a corner). The same
-  // absolute pad for the fine voxels: a voxel of `grid` that the walk of RayGrid passes within
-  // the rounding of a crossing point then holds a registered fine voxel (the one of its points
-  // nearest to the crossing), so its key is in voxels().
-  const double pad = 1e-6 * step;
-  Eigen::AlignedBox3d all;
+  Eigen::AlignedBox3d& all = scratch_.all;
+  all.setEmpty();
   for (const CellHandle& c : n_cells) {
     for (int k = 0; k < 4; ++k) {
       const CellHandle nb = c->neighbor(k);
@@ -101,7 +100,20 @@ void NewCellBorder::Build(const std::vector<CellHandle>& n_cells, uint32_t date,
       all.extend(box);
     }
   }
+}
+
+void NewCellBorder::Index() {
   if (facets_.empty()) return;
+  const VoxelGrid& grid = grid_;
+  const std::vector<Eigen::AlignedBox3d>& boxes = scratch_.boxes;
+  const Eigen::AlignedBox3d& all = scratch_.all;
+  const double step = grid.step();
+  // Voxels within this distance of a facet are registered too, far above the rounding of the
+  // voxel walks (which may skip a voxel that a segment grazes at an edge or a corner). The same
+  // absolute pad for the fine voxels: a voxel of `grid` that the walk of RayGrid passes within
+  // the rounding of a crossing point then holds a registered fine voxel (the one of its points
+  // nearest to the crossing), so its key is in voxels().
+  const double pad = 1e-6 * step;
 
   // The blocks: one voxel of `grid` each, or several (and no subdivision) when the box of the
   // border would need too many.

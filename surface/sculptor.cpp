@@ -5,6 +5,7 @@
 #include <CGAL/spatial_sort.h>
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 
 #include <Eigen/Geometry>
 #include <atomic>
@@ -870,15 +871,26 @@ struct IncrementalSculptor::Impl {
     }
   }
 
-  // Re-traces the old rays (those in the ray grid) over the new cells N (§4.4, see
-  // surface/internal/old_rays.h), incrementing only the counters of N cells.
-  void TraceOldRays(const std::vector<CellHandle>& n_cells, KeyframeStats& st) {
-    if (n_cells.empty() || num_registered_rays == 0) return;
-    const auto tick = Clock::now();
+  // Step 4 (§4.4): traces the new rays fully and re-traces the old rays (those in the ray grid)
+  // over the new cells N (see surface/internal/old_rays.h), incrementing only the counters of N
+  // cells. The border of N is collected before any new ray is traced (it leaves out the facets
+  // that no old ray crossed into, by the counters the old rays left); its voxel index and the
+  // candidate old rays are made while the new rays are traced (they read no counter), then the
+  // candidates are walked.
+  void TraceRays(const std::vector<RayTask>& new_rays, const std::vector<CellHandle>& n_cells,
+                 KeyframeStats& st) {
+    const bool old_rays = !n_cells.empty() && num_registered_rays > 0;
+    if (old_rays) CollectOldRayBorder(n_cells, st);
+    tbb::task_group selection;
+    if (old_rays) selection.run([&] { SelectOldRays(n_cells, st); });
+    Trace(new_rays, false);
+    selection.wait();
+    if (old_rays) WalkOldRays(st);
+  }
+
+  // The points that are vertices of N, and the border of N (NewCellBorder::Collect).
+  void CollectOldRayBorder(const std::vector<CellHandle>& n_cells, KeyframeStats& st) {
     const uint32_t date = stamp;
-    std::vector<uint32_t>& candidates = old_ray_candidates;
-    candidates.clear();
-    internal::NewCellBorder* border = nullptr;
     for (const CellHandle& c : n_cells) {
       for (int i = 0; i < 4; ++i) {
         const VertexHandle v = c->vertex(i);
@@ -886,17 +898,28 @@ struct IncrementalSculptor::Impl {
         points[v->info().point].n_stamp = date;
       }
     }
+    if (options.old_rays == OldRayTracing::kAllRays) return;
+    if (!old_ray_border) {
+      old_ray_border = std::make_unique<internal::NewCellBorder>(t.tri, ray_grid.grid());
+    }
+    old_ray_border->Collect(n_cells, date, /*only_crossed=*/true);
+    st.old_ray_facets = old_ray_border->NumFacets();
+    st.old_ray_facets_uncrossed = old_ray_border->NumUncrossed();
+  }
+
+  // The candidate old rays (old_ray_candidates): those registered in the voxels that the border
+  // of N touches and those of the points that are vertices of N (every old ray with kAllRays).
+  void SelectOldRays(const std::vector<CellHandle>& n_cells, KeyframeStats& st) {
+    const auto tick = Clock::now();
+    const uint32_t date = stamp;
+    std::vector<uint32_t>& candidates = old_ray_candidates;
+    candidates.clear();
     if (options.old_rays == OldRayTracing::kAllRays) {
       candidates.resize(num_registered_rays);
       for (uint32_t id = 0; id < num_registered_rays; ++id) candidates[id] = id;
     } else {
-      if (!old_ray_border) {
-        old_ray_border = std::make_unique<internal::NewCellBorder>(t.tri, ray_grid.grid());
-      }
-      border = old_ray_border.get();
-      border->Build(n_cells, date, /*only_crossed=*/true);
-      st.old_ray_facets = border->NumFacets();
-      st.old_ray_facets_uncrossed = border->NumUncrossed();
+      internal::NewCellBorder* border = old_ray_border.get();
+      border->Index();
       ray_seen.resize(num_registered_rays, 0);
       auto add = [&](uint32_t id) {
         if (id < num_registered_rays && ray_seen[id] != date) {
@@ -922,7 +945,14 @@ struct IncrementalSculptor::Impl {
     }
     st.rays_old_candidates = candidates.size();
     st.ms_rays_select = MsSince(tick);
+  }
 
+  // Walks the candidate old rays over N.
+  void WalkOldRays(KeyframeStats& st) {
+    const uint32_t date = stamp;
+    const std::vector<uint32_t>& candidates = old_ray_candidates;
+    const internal::NewCellBorder* border =
+        options.old_rays == OldRayTracing::kAllRays ? nullptr : old_ray_border.get();
     const auto walk_tick = Clock::now();
     const bool runs = options.old_rays == OldRayTracing::kNewCellRuns;
     std::atomic<size_t> became_free{0}, visited{0}, traced{0};
@@ -1125,8 +1155,7 @@ struct IncrementalSculptor::Impl {
         tasks.emplace_back(points[i].vertex, ToCgal(o));
     }
     st.rays_new = tasks.size();
-    Trace(tasks, false);
-    TraceOldRays(n_cells, st);
+    TraceRays(tasks, n_cells, st);
     RegisterRays(rec);
     keyframes.push_back(std::move(rec));
     st.ms_rays = MsSince(tick);

@@ -106,6 +106,11 @@ class NewCellBorder {
   // from the same cell; OldRayTracingGivesTheBruteForceCountersOnARandomStream checks it with
   // points on common planes).
   void Build(const std::vector<CellHandle>& n_cells, uint32_t date, bool only_crossed = false);
+  // Build in two parts: Collect finds the border facets (the only part that reads the cells'
+  // ray counters), Index registers them in the voxels (it reads only the facets, so it may run
+  // while rays are traced).
+  void Collect(const std::vector<CellHandle>& n_cells, uint32_t date, bool only_crossed);
+  void Index();
   // Border facets left out by only_crossed in the last Build (their outer cell uncrossed).
   size_t NumUncrossed() const { return uncrossed_; }
   // Keys of the voxels of `grid` that a border facet touches (a superset).
@@ -187,6 +192,7 @@ class NewCellBorder {
   std::vector<int32_t> block_offset_[3], voxel_offset_[3];
   struct Scratch {  // Build's buffers, kept for their memory
     std::vector<Eigen::AlignedBox3d> boxes;
+    Eigen::AlignedBox3d all;  // of the boxes
     std::vector<std::pair<uint32_t, uint32_t>> registered, registered_in_block;
     std::vector<uint32_t> count, block_count;
   } scratch_;

@@ -876,16 +876,19 @@ struct IncrementalSculptor::Impl {
   // cells. The border of N is collected before any new ray is traced (it leaves out the facets
   // that no old ray crossed into, by the counters the old rays left); its voxel index and the
   // candidate old rays are made while the new rays are traced (they read no counter), then the
-  // candidates are walked.
+  // candidates are walked while the keyframe's rays join the ray grid (RegisterRays: the walks
+  // do not read it).
   void TraceRays(const std::vector<RayTask>& new_rays, const std::vector<CellHandle>& n_cells,
-                 KeyframeStats& st) {
+                 const KeyframeRecord& kf, KeyframeStats& st) {
     const bool old_rays = !n_cells.empty() && num_registered_rays > 0;
     if (old_rays) CollectOldRayBorder(n_cells, st);
-    tbb::task_group selection;
-    if (old_rays) selection.run([&] { SelectOldRays(n_cells, st); });
+    tbb::task_group side;
+    if (old_rays) side.run([&] { SelectOldRays(n_cells, st); });
     Trace(new_rays, false);
-    selection.wait();
+    side.wait();
+    side.run([&] { RegisterRays(kf); });
     if (old_rays) WalkOldRays(st);
+    side.wait();
   }
 
   // The points that are vertices of N, and the border of N (NewCellBorder::Collect).
@@ -1155,8 +1158,7 @@ struct IncrementalSculptor::Impl {
         tasks.emplace_back(points[i].vertex, ToCgal(o));
     }
     st.rays_new = tasks.size();
-    TraceRays(tasks, n_cells, st);
-    RegisterRays(rec);
+    TraceRays(tasks, n_cells, rec, st);
     keyframes.push_back(std::move(rec));
     st.ms_rays = MsSince(tick);
 

@@ -198,7 +198,8 @@ struct KeyframeStats {
   size_t smoothed_vertices = 0, smoothing_rejected = 0;
   double ms_genus = 0, ms_smooth = 0;
   // Step 4 details (§4.4): old rays proposed by the ray index before the exact selection, cells
-  // visited by the re-traced old rays, and the milliseconds of the selection and of their walks.
+  // visited by the re-traced old rays, and the milliseconds of the selection (which runs beside
+  // the tracing of the new rays, inside ms_rays) and of their walks.
   size_t rays_old_candidates = 0, old_walk_cells = 0;
   double ms_rays_select = 0, ms_rays_old = 0;
   // The §5.1 filters one by one, each point counted by the first that removes it, in this order:

@@ -294,10 +294,6 @@ void DelaunayMesh::Impl::WalkLoop(const internal::Point& p, const internal::Poin
   // A guard against degenerate cycling: a walk never visits more cells than T has.
   for (size_t steps = 0; steps <= tri.number_of_cells(); ++steps) {
     if (tri.is_infinite(cell)) return;
-    // The next cell is one of these: their loads overlap the predicates below.
-    for (int k = 0; k < 4; ++k) {
-      if (k != entry || first) __builtin_prefetch(&*cell->neighbor(k));
-    }
     // A visit that returns bool ends the walk by returning false.
     if constexpr (std::is_same_v<decltype(visit(cell)), bool>) {
       if (!visit(cell)) return;

@@ -101,10 +101,10 @@ class NewCellBorder {
   NewCellBorder(const Delaunay& tri, const VoxelGrid& grid, int subdivision = kDefaultSubdivision);
   // only_crossed: leaves out the facets whose outer cell (not in N) has a zero ray counter. An
   // old ray (traced before the keyframe) that enters N through a facet crosses the cell outside
-  // it first, which its walk counted, so none enters through those. Exact as far as the walks
-  // are (a ray through an edge or a vertex of T follows the same cells each time it is walked
-  // from the same cell; OldRayTracingGivesTheBruteForceCountersOnARandomStream checks it with
-  // points on common planes).
+  // it first, which its walk counted, so none enters through those. Exact for rays in general
+  // position; a walk through an edge or a vertex of T may pick other cells around it than an
+  // earlier walk of the same ray did (OldRayTracingGivesTheBruteForceCountersOnARandomStream,
+  // with points on common planes, compares every counter with the brute force).
   void Build(const std::vector<CellHandle>& n_cells, uint32_t date, bool only_crossed = false);
   // Build in two parts: Collect finds the border facets (the only part that reads the cells'
   // ray counters), Index registers them in the voxels (it reads only the facets, so it may run

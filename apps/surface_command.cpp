@@ -168,7 +168,7 @@ void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOpti
   command
       ->add_option("--enclosing", *enclosing,
                    "Enclosing set E: conflict (the default: the new points' conflict zones + "
-                   "margin, widened by vertex stars; on the paper drive steps 1-5 1.9x faster "
+                   "margin, widened by vertex stars; on the paper drive steps 1-5 1.4-1.8x faster "
                    "than the ball, higher F-scores, fewer errors > 6 m) | ball (paper §4.1, "
                    "B_{r+l} around the keyframe)")
       ->capture_default_str();

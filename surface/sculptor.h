@@ -129,8 +129,8 @@ struct SculptorOptions {
   // batch (with batch_init): the re-sculpt of a map corrected by a loop closure keeps the first
   // sculpting's s (apps/pipeline/). Otherwise a known scale sculpts each keyframe as it comes.
   bool batch_with_known_scale = false;
-  // The conflict zones by default: on the paper drive (surface --from-gt) steps 1-5 take about
-  // half the ball's time with higher F-scores and fewer errors > 6 m (docs/design.md).
+  // The conflict zones by default: on the paper drive (surface --from-gt) steps 1-5 take 0.55 to
+  // 0.7 of the ball's time, with higher F-scores and fewer errors > 6 m (docs/design.md).
   EnclosingMode enclosing = EnclosingMode::kConflictZones;
   int enclosing_margin = 2;  // kConflictZones: rings of neighbouring cells added around D
   // kConflictZones: where the shrink left cells of O in D (it is blocked by the manifold tests:

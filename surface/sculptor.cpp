@@ -192,9 +192,10 @@ struct IncrementalSculptor::Impl {
   internal::RayGrid ray_grid;
   uint32_t num_registered_rays = 0;
   std::vector<uint32_t> ray_seen;
-  // Scratch of TraceOldRays kept between keyframes: the border of N (rebuilt each time) and the
-  // candidate rays.
+  // Scratch of step 4 kept between keyframes: the border of N (rebuilt each time), the points
+  // that are vertices of N (indices in `points`, each once) and the candidate rays.
   std::unique_ptr<internal::NewCellBorder> old_ray_border;
+  std::vector<int> n_points;
   std::vector<uint32_t> old_ray_candidates;
   // The several-at-once attempts (§4.5, §4.7) that failed in the current phase (the shrink or
   // the growth of one keyframe), by vertex index: the attempt at v fails again while the stars
@@ -883,7 +884,7 @@ struct IncrementalSculptor::Impl {
     const bool old_rays = !n_cells.empty() && num_registered_rays > 0;
     if (old_rays) CollectOldRayBorder(n_cells, st);
     tbb::task_group side;
-    if (old_rays) side.run([&] { SelectOldRays(n_cells, st); });
+    if (old_rays) side.run([&] { SelectOldRays(st); });
     Trace(new_rays, false);
     side.wait();
     side.run([&] { RegisterRays(kf); });
@@ -891,14 +892,19 @@ struct IncrementalSculptor::Impl {
     side.wait();
   }
 
-  // The points that are vertices of N, and the border of N (NewCellBorder::Collect).
+  // The points that are vertices of N (n_points, stamped n_stamp), and the border of N
+  // (NewCellBorder::Collect).
   void CollectOldRayBorder(const std::vector<CellHandle>& n_cells, KeyframeStats& st) {
     const uint32_t date = stamp;
+    n_points.clear();
     for (const CellHandle& c : n_cells) {
       for (int i = 0; i < 4; ++i) {
         const VertexHandle v = c->vertex(i);
         if (t.tri.is_infinite(v) || v->info().point < 0) continue;
-        points[v->info().point].n_stamp = date;
+        PointRecord& p = points[v->info().point];
+        if (p.n_stamp == date) continue;
+        p.n_stamp = date;
+        n_points.push_back(v->info().point);
       }
     }
     if (options.old_rays == OldRayTracing::kAllRays) return;
@@ -912,7 +918,7 @@ struct IncrementalSculptor::Impl {
 
   // The candidate old rays (old_ray_candidates): those registered in the voxels that the border
   // of N touches and those of the points that are vertices of N (every old ray with kAllRays).
-  void SelectOldRays(const std::vector<CellHandle>& n_cells, KeyframeStats& st) {
+  void SelectOldRays(KeyframeStats& st) {
     const auto tick = Clock::now();
     const uint32_t date = stamp;
     std::vector<uint32_t>& candidates = old_ray_candidates;
@@ -936,13 +942,9 @@ struct IncrementalSculptor::Impl {
           for (uint32_t id : *rays) add(id);
         }
       }
-      for (const CellHandle& c : n_cells) {
-        for (int i = 0; i < 4; ++i) {
-          const VertexHandle v = c->vertex(i);
-          if (t.tri.is_infinite(v) || v->info().point < 0) continue;
-          const PointRecord& p = points[v->info().point];
-          for (size_t k = 0; k < p.origins.size(); ++k) add(p.first_ray + static_cast<uint32_t>(k));
-        }
+      for (int i : n_points) {
+        const PointRecord& p = points[i];
+        for (size_t k = 0; k < p.origins.size(); ++k) add(p.first_ray + static_cast<uint32_t>(k));
       }
       std::sort(candidates.begin(), candidates.end());  // rays of nearby points together
     }

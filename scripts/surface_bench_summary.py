@@ -80,6 +80,16 @@ def main():
               f"smoothing candidates {statistics.mean(f(r, 'smoothing_candidates') for r in inc):.0f}"
               + (f", free cells grown around changes {statistics.mean(f(r, 'cells_grow_extra') for r in inc):.0f}"
                  if "cells_grow_extra" in inc[0] else ""))
+    if inc and "old_ray_queries" in inc[0]:
+        # Step 4's old rays (paper 4.4): candidates, their border queries and what a query costs.
+        mean = lambda k: statistics.mean(f(r, k) for r in inc)
+        per_query = lambda k: sum(f(r, k) for r in inc) / max(1.0, sum(f(r, "old_ray_queries") for r in inc))
+        print(f"  old rays per keyframe: candidates {mean('rays_old_candidates'):.0f}, crossing N "
+              f"{mean('rays_old'):.0f}, cells visited {mean('old_walk_cells'):.0f}; border facets "
+              f"{mean('old_ray_facets'):.0f} (left out uncrossed {mean('old_ray_facets_uncrossed'):.0f}); "
+              f"per query: voxels {per_query('old_ray_query_voxels'):.1f}, facets tested "
+              f"{per_query('old_ray_facet_tests'):.1f}, past the plane filter "
+              f"{per_query('old_ray_plane_passes'):.1f}")
 
 
 if __name__ == "__main__":

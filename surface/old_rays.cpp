@@ -355,9 +355,18 @@ NewCellBorder::Test NewCellBorder::TestFacet(uint32_t id, const Query& q) const 
 }
 
 bool NewCellBorder::Entries(VertexHandle from_vertex, const Point& target,
-                            std::vector<CellFacet>* entries) const {
+                            std::vector<CellFacet>* entries, EntriesWork* work) const {
   entries->clear();
   if (facets_.empty()) return true;
+  EntriesWork counted;
+  struct AddOnReturn {
+    EntriesWork& counted;
+    EntriesWork* work;
+    ~AddOnReturn() {
+      if (work != nullptr) *work += counted;
+    }
+  } add_on_return{counted, work};
+  ++counted.queries;
   const Query q(from_vertex, target);
 
   // The part of the segment in the box of the blocks, grown by a fine voxel: a crossing point
@@ -412,6 +421,7 @@ bool NewCellBorder::Entries(VertexHandle from_vertex, const Point& target,
   auto test = [&](uint32_t id) {
     if (tested_by[id] == this_query) return true;
     tested_by[id] = this_query;
+    ++counted.facets;
     {
       // TestFacet's plane test inline (most facets end there).
       const Facet& f = facets[id];
@@ -419,6 +429,7 @@ bool NewCellBorder::Entries(VertexHandle from_vertex, const Point& target,
       const double tol = f.tolerance * std::max(f.extent, q.extent);
       if (f.inner * sa > tol || (f.inner * sa < -tol && f.inner * sb < -tol)) return true;
     }
+    ++counted.plane_passes;
     switch (TestFacet(id, q)) {
       case Test::kMiss:
         return true;
@@ -432,6 +443,7 @@ bool NewCellBorder::Entries(VertexHandle from_vertex, const Point& target,
     return false;
   };
   ForEachVoxelIndexOnSegment(fine_step_, clip_a, clip_b, [&](const Eigen::Vector3i& global) {
+    ++counted.voxels;
     const Eigen::Vector3i r = global - fine_lo;
     if ((r.array() < 0).any() || (r.array() >= fine_size.array()).any()) return true;
     const int32_t number = block[bx[r.x()] + by[r.y()] + bz[r.z()]];

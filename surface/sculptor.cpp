@@ -11,6 +11,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <queue>
 #include <sstream>
 #include <unordered_map>
@@ -62,7 +63,9 @@ std::string KeyframeStatsCsvHeader() {
          "smoothed_vertices,smoothing_rejected,ms_genus,ms_smooth,rays_old_candidates,"
          "old_walk_cells,ms_rays_select,ms_rays_old,points_invalid,points_filtered_ground,"
          "points_filtered_length,points_filtered_aperture,enclose_rounds,cells_e_added,"
-         "cells_active,smoothing_candidates,cells_grow_extra";
+         "cells_active,smoothing_candidates,cells_grow_extra,old_ray_facets,"
+         "old_ray_facets_uncrossed,old_ray_queries,old_ray_query_voxels,old_ray_facet_tests,"
+         "old_ray_plane_passes";
 }
 
 std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
@@ -80,7 +83,9 @@ std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
     << s.ms_rays_old << ',' << s.points_invalid << ',' << s.points_filtered_ground << ','
     << s.points_filtered_length << ',' << s.points_filtered_aperture << ',' << s.enclose_rounds
     << ',' << s.cells_e_added << ',' << s.cells_active << ',' << s.smoothing_candidates << ','
-    << s.cells_grow_extra;
+    << s.cells_grow_extra << ',' << s.old_ray_facets << ',' << s.old_ray_facets_uncrossed << ','
+    << s.old_ray_queries << ',' << s.old_ray_query_voxels << ',' << s.old_ray_facet_tests << ','
+    << s.old_ray_plane_passes;
   return o.str();
 }
 
@@ -961,6 +966,8 @@ struct IncrementalSculptor::Impl {
     const auto walk_tick = Clock::now();
     const bool runs = options.old_rays == OldRayTracing::kNewCellRuns;
     std::atomic<size_t> became_free{0}, visited{0}, traced{0};
+    std::mutex work_mutex;
+    internal::EntriesWork work;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates.size(), 64),
                       [&](const tbb::blocked_range<size_t>& range) {
                         size_t local_free = 0, cells = 0, rays = 0;
@@ -980,11 +987,12 @@ struct IncrementalSculptor::Impl {
                           return true;
                         };
                         std::vector<internal::CellFacet> entries;
+                        internal::EntriesWork local_work;
                         for (size_t i = range.begin(); i != range.end(); ++i) {
                           const uint32_t id = candidates[i];
                           const PointRecord& p = points[ray_point[id]];
                           const Point target = ToCgal(p.origins[id - p.first_ray]);
-                          if (runs && border->Entries(p.vertex, target, &entries)) {
+                          if (runs && border->Entries(p.vertex, target, &entries, &local_work)) {
                             const bool starts_in_n = p.n_stamp == date;
                             if (starts_in_n) t.Walk(p.vertex, target, 2.0, run);
                             for (const internal::CellFacet& e : entries) {
@@ -999,8 +1007,14 @@ struct IncrementalSculptor::Impl {
                         became_free += local_free;
                         visited += cells;
                         traced += rays;
+                        const std::lock_guard<std::mutex> lock(work_mutex);
+                        work += local_work;
                       });
     t.num_f += became_free;
+    st.old_ray_queries = work.queries;
+    st.old_ray_query_voxels = work.voxels;
+    st.old_ray_facet_tests = work.facets;
+    st.old_ray_plane_passes = work.plane_passes;
     st.rays_old = traced;
     st.old_walk_cells = visited;
     st.ms_rays_old = MsSince(walk_tick);

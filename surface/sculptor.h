@@ -208,8 +208,13 @@ struct KeyframeStats {
   size_t points_invalid = 0, points_filtered_ground = 0, points_filtered_length = 0,
          points_filtered_aperture = 0;
   // The border facets of N indexed for the old rays, and those left out because no ray crossed
-  // the cell outside them (NewCellBorder::Build). Not in the CSV row.
+  // the cell outside them (NewCellBorder::Build).
   size_t old_ray_facets = 0, old_ray_facets_uncrossed = 0;
+  // The crossings of N's border found for the candidate old rays (internal::EntriesWork): the
+  // queries, the fine voxels they walked, the border facets they tested and those of them that
+  // the plane filter in doubles did not settle.
+  size_t old_ray_queries = 0, old_ray_query_voxels = 0, old_ray_facet_tests = 0,
+         old_ray_plane_passes = 0;
   // kConflictZones: widening rounds of E done after the first shrink, and the cells they added.
   size_t enclose_rounds = 0, cells_e_added = 0;
   // kConflictZones: cells of F \ O added to the growth region around the changes of δO

@@ -69,6 +69,21 @@ class RayGrid {
 // A facet of a cell: the cell and the index of the vertex opposite the facet.
 using CellFacet = std::pair<CellHandle, int>;
 
+// What NewCellBorder::Entries did, summed over calls (the cost model of the old rays' queries).
+struct EntriesWork {
+  size_t queries = 0;
+  size_t voxels = 0;        // fine voxels walked along the segments
+  size_t facets = 0;        // border facets tested (each once per query)
+  size_t plane_passes = 0;  // of them, not settled by the plane filter in doubles
+  EntriesWork& operator+=(const EntriesWork& o) {
+    queries += o.queries;
+    voxels += o.voxels;
+    facets += o.facets;
+    plane_passes += o.plane_passes;
+    return *this;
+  }
+};
+
 // The border of the new cells N (cells whose date is `date`) in a voxel grid.
 //
 // For candidate selection the border facets are registered in the voxels of `grid` (those of
@@ -125,8 +140,9 @@ class NewCellBorder {
   // The places where the segment from→target (from: the vertex `from`) crosses the border into
   // N, each as the N cell entered and the facet it is entered through, in no particular order.
   // False when a crossing is not clean (then *entries is incomplete: walk the whole segment).
-  // Thread-safe.
-  bool Entries(VertexHandle from, const Point& target, std::vector<CellFacet>* entries) const;
+  // Thread-safe. work: if given, what the call did is added to it.
+  bool Entries(VertexHandle from, const Point& target, std::vector<CellFacet>* entries,
+               EntriesWork* work = nullptr) const;
   // The same with every border facet tested (no voxels): the reference of the tests.
   bool EntriesBruteForce(VertexHandle from, const Point& target,
                          std::vector<CellFacet>* entries) const;

@@ -60,7 +60,8 @@ const char* const kColumns =
     "smoothing_rejected,ms_genus,ms_smooth,rays_old_candidates,old_walk_cells,ms_rays_select,"
     "ms_rays_old,points_invalid,points_filtered_ground,points_filtered_length,"
     "points_filtered_aperture,enclose_rounds,cells_e_added,cells_active,smoothing_candidates,"
-    "cells_grow_extra";
+    "cells_grow_extra,old_ray_facets,old_ray_facets_uncrossed,old_ray_queries,"
+    "old_ray_query_voxels,old_ray_facet_tests,old_ray_plane_passes";
 
 TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPerKeyframe) {
   const fs::path drive = dir_->path() / "drive";

@@ -239,7 +239,8 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
   IncrementalSculptor brute(options);
   options.old_rays = OldRayTracing::kNewCellRuns;
   IncrementalSculptor fast(options);
-  size_t old_rays = 0, compared = 0, candidates = 0, facets = 0, uncrossed = 0;
+  size_t old_rays = 0, compared = 0, candidates = 0, facets = 0, uncrossed = 0, queries = 0,
+         facet_tests = 0;
   for (const SurfaceKeyframe& kf : stream) {
     const std::vector<KeyframeStats> a = brute.AddKeyframe(kf), b = fast.AddKeyframe(kf);
     ASSERT_EQ(a.size(), 1u);
@@ -249,6 +250,13 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
     facets += b[0].old_ray_facets;
     uncrossed += b[0].old_ray_facets_uncrossed;
     EXPECT_LE(b[0].rays_old, b[0].rays_old_candidates);
+    // Every candidate asks the border index for its crossings (when N has a border to cross).
+    if (b[0].old_ray_facets > 0) {
+      EXPECT_EQ(b[0].old_ray_queries, b[0].rays_old_candidates);
+    }
+    EXPECT_LE(b[0].old_ray_plane_passes, b[0].old_ray_facet_tests);
+    queries += b[0].old_ray_queries;
+    facet_tests += b[0].old_ray_facet_tests;
     std::vector<CellKey> cells = brute.triangulation().FiniteCells();
     std::vector<CellKey> cells_fast = fast.triangulation().FiniteCells();
     std::sort(cells.begin(), cells.end());
@@ -271,6 +279,8 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
             << "\n";
   EXPECT_GT(facets, 0u);
   EXPECT_GT(uncrossed, facets / 10);
+  EXPECT_GT(queries, 0u);
+  EXPECT_GT(facet_tests, 0u);
 }
 
 // Paper §5.1 filters, with s = 1: below the ground by more than 3 s, farther than 15 s from the

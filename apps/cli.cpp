@@ -18,6 +18,11 @@ int& CommandExitCode() {
   return exit_code;
 }
 
+void ReportNotUsable(const std::string& message) {
+  std::fprintf(stderr, "omnisculpt: error: %s\n", message.c_str());
+  CommandExitCode() = kExitNotUsable;
+}
+
 int RunCommandLine(int argc, char** argv) {
   CLI::App app{
       "omnisculpt: camera poses, sparse points and a 2-manifold surface of a city from the "

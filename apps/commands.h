@@ -22,6 +22,17 @@ struct GlobalOptions {
 // non-manifold mesh sets 1).
 int& CommandExitCode();
 
+// The exit codes: 0 success; 1 a check that failed (mesh-check of a non-manifold mesh) or an
+// internal error; 2 bad input or bad options (one line on stderr naming the file, the field
+// and the problem); 3 the run ended without a usable result (the SfM did not initialise or
+// lost tracking for good, or the surface is empty), its outputs saying what happened.
+constexpr int kExitCheckFailed = 1;
+constexpr int kExitBadInput = 2;
+constexpr int kExitNotUsable = 3;
+
+// One line on stderr ("omnisculpt: error: <message>") and exit code kExitNotUsable.
+void ReportNotUsable(const std::string& message);
+
 void RegisterCalibCommands(CLI::App& app, const GlobalOptions& global);
 void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterEvalCommands(CLI::App& app, const GlobalOptions& global);

@@ -1,6 +1,6 @@
-// `omnisculpt reconstruct DRIVE --out OUT` (issue 9): the whole job in one process, SfM and
-// surface on their own threads joined by a bounded queue (apps/pipeline/), writing the outputs
-// of DESIGN.md §4.
+// `omnisculpt reconstruct DRIVE --out OUT`: the whole job in one process, SfM and surface on
+// their own threads joined by a bounded queue (pipeline/reconstruction.h), writing the outputs
+// of docs/design.md §4.
 //
 // Resume-safe output: everything is written into the sibling folder OUT.incomplete/, marked by
 // the file INCOMPLETE, and renamed to OUT only when complete (the last file written is
@@ -23,14 +23,14 @@
 #include <string>
 
 #include "apps/commands.h"
-#include "apps/pipeline/pipeline.h"
-#include "apps/pipeline/point_colors.h"
-#include "apps/pipeline/sfm_stats.h"
+#include "apps/sfm_options.h"
 #include "calib/atomic_file.h"
 #include "calib/drive.h"
 #include "calib/error.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
+#include "pipeline/reconstruction.h"
+#include "pipeline/sfm_outputs.h"
 #include "sfm/colmap_model.h"
 #include "surface/manifold_check.h"
 
@@ -43,9 +43,7 @@ struct ReconstructCommandOptions {
   std::string drive;
   std::string out;
   bool force = false;
-  bool central = false;
-  bool non_central = false;
-  double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
+  SfmCommandLine sfm;  // the SfM group, as `sfm` takes it (apps/sfm_options.h)
   std::string loop_replay = "batch";
   // The surface's enclosing set (--enclosing).
   std::string enclosing = EnclosingName(SculptorOptions().enclosing);
@@ -115,30 +113,14 @@ void Publish(const fs::path& partial, const fs::path& out) {
   }
 }
 
-void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
-  if (o.out.empty()) throw InputError("", "--out", "an output folder is required");
-  if (o.central && o.non_central)
-    throw InputError("", "--central, --non-central", "give at most one of them");
-  if (!(o.frame_rate > 0.0)) throw InputError("", "--frame-rate", "expected a positive rate");
-  if (o.loop_replay == "batch") {
-    o.pipeline.loop_replay = LoopReplay::kBatch;
-  } else if (o.loop_replay == "incremental") {
-    o.pipeline.loop_replay = LoopReplay::kIncremental;
-  } else {
-    throw InputError("", "--loop-replay", "expected batch or incremental");
-  }
-  ApplyEnclosingOption(o.enclosing, &o.pipeline.sculptor);
-  const Drive drive = Drive::Open(o.drive);
+// Runs the pipeline and writes its outputs into `partial`, published as `out` at the end.
+void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions& global,
+                         const Drive& drive, const fs::path& out, const fs::path& partial) {
   const Rig& rig = drive.rig();
-  o.pipeline.tracker.central = o.central ? true : o.non_central ? false : rig.central;
-  o.pipeline.progress_period = isatty(fileno(stderr)) ? 2.0 : 10.0;
-  if (const std::string problem = o.pipeline.Check(); !problem.empty())
-    throw InputError("", "options", problem);
-  const fs::path out = fs::absolute(fs::path(o.out)).lexically_normal();
-  const fs::path partial = PrepareOutput(out.has_filename() ? out : out.parent_path(), o.force);
+  const bool central = o.pipeline.sfm.tracker.central;
   spdlog::info("reconstruct: {} frames of {}, {} cameras, {} mode; writing {}", drive.NumFrames(),
-               drive.folder().string(), rig.NumCameras(),
-               o.pipeline.tracker.central ? "central" : "non-central", partial.string());
+               drive.folder().string(), rig.NumCameras(), central ? "central" : "non-central",
+               partial.string());
 
   PipelineCallbacks callbacks;
   if (!global.quiet) {
@@ -160,75 +142,55 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
     };
   }
   const PipelineResult result = RunPipeline(drive, o.pipeline, callbacks);
+  const SfmRunResult& sfm = result.sfm;
 
-  std::vector<StampedPose> poses;
-  PointCloud cloud;
-  for (const FinalizedKeyframe& keyframe : result.keyframes) {
-    poses.push_back({keyframe.frame / o.frame_rate, keyframe.world_from_rig});
-    for (const FinalizedPoint& point : keyframe.points) cloud.points.push_back(point.position);
-  }
-  // Point colours from the keyframe images, now that the SfM thread is done.
-  PointColorStats color_stats;
-  cloud.colors = ColorPoints(
-      rig, result.keyframes,
-      [&drive](int frame, int camera) { return drive.LoadRgb(frame, camera); }, {}, &color_stats);
+  // The SfM's files, by the sfm command's writer (pipeline/sfm_outputs.h).
+  SfmOutputOptions output_options;
+  output_options.frame_rate = o.sfm.frame_rate;
+  output_options.queue_wait_seconds = result.queue_blocked_seconds;
+  const SfmOutputs outputs = WriteSfmOutputs(drive, sfm, partial, output_options);
   spdlog::info("reconstruct: point colours from {} keyframe images in {:.2f} s",
-               color_stats.images_read, color_stats.seconds);
-  WriteTum(poses, partial / "poses.tum");
-  WritePlyPoints(cloud, partial / "points.ply");
-  WritePlyMesh(result.mesh, partial / "surface.ply");
-  // The COLMAP text model, by the sfm command's writer (sfm/colmap_model.h).
-  const ColmapModelStats colmap = WriteColmapTextModel(
-      rig, result.keyframes,
-      [&drive](int frame, int camera) {
-        return fs::relative(drive.ImagePath(frame, camera), drive.folder()).generic_string();
-      },
-      partial / "sparse", cloud.colors);
-  std::ostringstream frames_csv, keyframes_csv;
-  frames_csv << PipelineFramesCsvHeader() << '\n';
-  for (const PipelineFrameRow& row : result.frames) frames_csv << PipelineFramesCsvRow(row) << '\n';
+               outputs.colors.images_read, outputs.colors.seconds);
+  // No surface file without a surface (a run that is not usable says why).
+  if (!result.mesh.triangles.empty()) WritePlyMesh(result.mesh, partial / "surface.ply");
+  std::ostringstream keyframes_csv;
   keyframes_csv << PipelineKeyframesCsvHeader() << '\n';
   for (const PipelineKeyframeRow& row : result.surface_rows)
     keyframes_csv << PipelineKeyframesCsvRow(row) << '\n';
-  WriteTextFileAtomically(partial / "stats" / "sfm_frames.csv", frames_csv.str());
   WriteTextFileAtomically(partial / "stats" / "keyframes.csv", keyframes_csv.str());
-  // stats/sfm_stages.csv and sfm_summary.csv, by the sfm command's writer.
-  SfmStats sfm;
-  for (const PipelineFrameRow& row : result.frames)
-    sfm.AddFrame(row.loaded, row.matched, row.result);
-  sfm.keyframes = result.keyframes.size();
-  sfm.points = cloud.points.size();
-  sfm.colmap = colmap;
-  sfm.tracks = ComputeTrackStats(result.keyframes);
-  sfm.front = result.sfm_front;
-  sfm.back = result.sfm_back;
-  sfm.load_seconds = result.load_seconds;
-  sfm.loop_closure_seconds = result.loop_closure_seconds;
-  sfm.queue_wait_seconds = result.queue_blocked_seconds;
-  sfm.total_seconds = result.sfm_seconds;
-  WriteSfmStats(sfm, partial / "stats");
 
   std::vector<double> surface_ms, queue_ms;
   for (const PipelineKeyframeRow& row : result.surface_rows) {
     if (!row.surface.batch) surface_ms.push_back(row.surface.ms_total);
     queue_ms.push_back(row.queue_ms);
   }
-  const size_t untracked = sfm.frames_not_tracked;
+  const SfmStats& stats = outputs.stats;
   const ManifoldReport manifold = CheckManifold(result.mesh);
+  // A usable result: a usable SfM map and a surface with triangles.
+  std::string failure;
+  if (sfm.outcome != SfmOutcome::kUsable)
+    failure = sfm.outcome_reason;
+  else if (result.mesh.triangles.empty())
+    failure = "the surface is empty (" + sfm.outcome_reason + ")";
+  const double frames_per_second = sfm.frames_total / std::max(result.seconds, 1e-9);
   nlohmann::json summary = {
       {"drive", drive.folder().string()},
-      {"mode", o.pipeline.tracker.central ? "central" : "non-central"},
-      {"frames", result.frames_total},
-      {"frames_skipped", result.skipped.size()},
-      {"skipped", result.skipped},
-      {"frames_not_tracked", untracked},
-      {"keyframes", result.keyframes.size()},
-      {"points", cloud.points.size()},
+      {"status", failure.empty() ? "usable" : "not_usable"},
+      {"sfm_outcome", SfmOutcomeName(sfm.outcome)},
+      {"outcome", failure.empty() ? sfm.outcome_reason : failure},
+      {"mode", central ? "central" : "non-central"},
+      {"frames", sfm.frames_total},
+      {"frames_skipped", sfm.skipped.size()},
+      {"skipped", sfm.skipped},
+      {"frames_tracked", sfm.frames_tracked},
+      {"frames_not_tracked", stats.frames_not_tracked},
+      {"keyframes", sfm.keyframes.size()},
+      {"points", outputs.cloud.points.size()},
       {"triangles", result.mesh.triangles.size()},
       {"manifold", manifold.IsOrientedManifold()},
       {"seconds", result.seconds},
-      {"frames_per_second", result.frames_total / std::max(result.seconds, 1e-9)},
-      {"sfm_seconds", result.sfm_seconds},
+      {"frames_per_second", frames_per_second},
+      {"sfm_seconds", sfm.seconds},
       {"surface_busy_seconds", result.surface_seconds},
       {"surface_ms_median", Quantile(surface_ms, 0.5)},
       {"surface_ms_p95", Quantile(surface_ms, 0.95)},
@@ -241,8 +203,8 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
        queue_ms.empty() ? 0.0 : *std::max_element(queue_ms.begin(), queue_ms.end())},
   };
   nlohmann::json loops = nlohmann::json::array();
-  for (size_t i = 0; i < result.loop_closures.size(); ++i) {
-    const LoopClosureEvent& e = result.loop_closures[i];
+  for (size_t i = 0; i < sfm.loop_closures.size(); ++i) {
+    const LoopClosureEvent& e = sfm.loop_closures[i].event;
     loops.push_back(
         {{"keyframe", e.keyframe},
          {"frame", e.frame},
@@ -256,9 +218,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
          {"relative_pose_inliers", e.relative_inliers},
          {"rotation_disagreement_deg", e.rotation_disagreement * 180.0 / M_PI},
          {"correction_translation", e.correction_translation},
-         {"correction_rotation_deg", i < result.loop_correction_rotation_deg.size()
-                                         ? result.loop_correction_rotation_deg[i]
-                                         : 0.0},
+         {"correction_rotation_deg", sfm.loop_closures[i].correction_rotation_deg},
          {"correction_scale", e.correction_scale},
          {"ms", e.ms},
          {"surface_replay_seconds",
@@ -266,35 +226,71 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
          {"surface_replay_keyframes",
           i < result.loop_replay_keyframes.size() ? result.loop_replay_keyframes[i] : 0}});
   }
-  summary["colmap_images"] = colmap.images;
-  summary["colmap_points"] = colmap.points;
-  summary["colmap_mean_reprojection_error_px"] = colmap.mean_reprojection_error;
-  summary["loop_closure"] = o.pipeline.loop_closure;
+  summary["colmap_images"] = stats.colmap.images;
+  summary["colmap_points"] = stats.colmap.points;
+  summary["colmap_mean_reprojection_error_px"] = stats.colmap.mean_reprojection_error;
+  summary["loop_closure"] = o.pipeline.sfm.loop_closure;
   summary["loop_closures"] = loops;
   summary["surface_replay_seconds"] = result.replay_seconds;
   summary["loop_replay"] = o.loop_replay;
   summary["enclosing"] = o.enclosing;
-  summary["prefetch_frames_ahead"] = o.pipeline.prefetch.frames_ahead;
-  summary["point_colors_seconds"] = color_stats.seconds;
+  summary["prefetch_frames_ahead"] = o.pipeline.sfm.prefetch.frames_ahead;
+  summary["point_colors_seconds"] = outputs.colors.seconds;
   WriteTextFileAtomically(partial / kSummaryFile, summary.dump(2) + "\n");
   Publish(partial, out);
 
+  std::string written;
+  if (!result.mesh.triangles.empty()) written += "surface.ply, ";
+  if (sfm.outcome != SfmOutcome::kNotInitialised) written += "points.ply, poses.tum, sparse/, ";
+  written += std::string("stats/, ") + kSummaryFile;
   std::printf(
       "reconstruct: %zu frames (%zu skipped, %zu not tracked) in %.1f s (%.1f frames/s), %zu "
-      "keyframes, %zu points, %zu triangles, manifold %s\n"
+      "keyframes, %zu points, %zu triangles, manifold %s%s\n"
       "  surface ms per keyframe: median %.1f, p95 %.1f; queue: at most %zu of %d waiting, "
       "the SfM waited %.1f s for room; %zu loop closure(s), surface replays %.1f s\n"
-      "  wrote %s (surface.ply, points.ply, poses.tum, sparse/, stats/, %s)\n",
-      result.frames_total, result.skipped.size(), untracked, result.seconds,
-      result.frames_total / std::max(result.seconds, 1e-9), result.keyframes.size(),
-      cloud.points.size(), result.mesh.triangles.size(),
-      manifold.IsOrientedManifold() ? "yes" : "NO", Quantile(surface_ms, 0.5),
-      Quantile(surface_ms, 0.95), result.queue_max_size, o.pipeline.queue_capacity,
-      result.queue_blocked_seconds, result.loop_closures.size(), result.replay_seconds, out.c_str(),
-      kSummaryFile);
-  if (!manifold.IsOrientedManifold()) {
+      "  wrote %s (%s)\n",
+      sfm.frames_total, sfm.skipped.size(), stats.frames_not_tracked, result.seconds,
+      frames_per_second, sfm.keyframes.size(), outputs.cloud.points.size(),
+      result.mesh.triangles.size(), manifold.IsOrientedManifold() ? "yes" : "NO",
+      failure.empty() ? "" : "; NOT USABLE", Quantile(surface_ms, 0.5), Quantile(surface_ms, 0.95),
+      result.queue_max_size, o.pipeline.queue_capacity, result.queue_blocked_seconds,
+      sfm.loop_closures.size(), result.replay_seconds, out.c_str(), written.c_str());
+  if (!failure.empty()) {
+    ReportNotUsable(drive.folder().string() + ": " + failure + "; " + out.string() + "/" +
+                    kSummaryFile + " and stats/sfm_frames.csv say what happened");
+  } else if (!manifold.IsOrientedManifold()) {
     spdlog::error("reconstruct: the surface is not an oriented 2-manifold: {}", manifold.Summary());
-    CommandExitCode() = 1;
+    CommandExitCode() = kExitCheckFailed;
+  }
+}
+
+void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
+  if (o.out.empty()) throw InputError("", "--out", "an output folder is required");
+  if (o.loop_replay == "batch") {
+    o.pipeline.loop_replay = LoopReplay::kBatch;
+  } else if (o.loop_replay == "incremental") {
+    o.pipeline.loop_replay = LoopReplay::kIncremental;
+  } else {
+    throw InputError("", "--loop-replay", "expected batch or incremental");
+  }
+  ApplyEnclosingOption(o.enclosing, &o.pipeline.sculptor);
+  const Drive drive = Drive::Open(o.drive);
+  const Rig& rig = drive.rig();
+  ApplySfmOptions(rig, "reconstruct", &o.sfm);
+  o.pipeline.sfm = o.sfm.sfm;
+  o.pipeline.progress_period = isatty(fileno(stderr)) ? 2.0 : 10.0;
+  if (const std::string problem = o.pipeline.Check(); !problem.empty())
+    throw InputError("", "options", problem);
+  const fs::path out = fs::absolute(fs::path(o.out)).lexically_normal();
+  const fs::path partial = PrepareOutput(out.has_filename() ? out : out.parent_path(), o.force);
+  try {
+    WriteReconstruction(o, global, drive, out, partial);
+  } catch (...) {
+    // A run that failed leaves nothing behind (a killed one leaves OUT.incomplete, which the
+    // next run cleans up).
+    std::error_code ignored;
+    fs::remove_all(partial, ignored);
+    throw;
   }
 }
 
@@ -314,10 +310,6 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
                    "reconstruct.json); written as OUT.incomplete and renamed when complete")
       ->required();
   command->add_flag("--force", o->force, "Replace OUT if it holds a previous reconstruction");
-  command->add_flag("--central", o->central, "Central approximation (default: rig.json)");
-  command->add_flag("--non-central", o->non_central, "True camera offsets (default: rig.json)");
-  command->add_option("--max-frames", o->pipeline.max_frames, "0: the whole drive")
-      ->capture_default_str();
   command
       ->add_option("--snapshot-every", o->pipeline.snapshot_every,
                    "Write OUT/snapshots/surface_<keyframe>.ply every K keyframes (0: none)")
@@ -327,28 +319,12 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
                    "Keyframes that may wait between the SfM and the surface")
       ->capture_default_str();
   command
-      ->add_option("--downscale", o->pipeline.tracks.harris.downscale,
-                   "Shrink the images by this factor before detection (paper: 2)")
-      ->capture_default_str();
-  command
-      ->add_option("--corners", o->pipeline.tracks.harris.max_corners, "Harris corners per image")
-      ->capture_default_str();
-  command->add_flag("!--no-loop-closure", o->pipeline.loop_closure,
-                    "Do not detect revisits nor correct the drift");
-  command->add_flag("!--no-global-ba", o->pipeline.loop.global_bundle_adjustment,
-                    "After a loop closure, correct with the pose graph only");
-  command
       ->add_option("--loop-replay", o->loop_replay,
                    "Surface after a loop closure: batch (the corrected keyframes sculpted at "
                    "once) or incremental (one by one from scratch)")
       ->capture_default_str();
+  AddSfmOptions(command, &o->sfm);
   AddEnclosingOptions(command, &o->enclosing, &o->pipeline.sculptor);
-  command
-      ->add_option("--prefetch", o->pipeline.prefetch.frames_ahead,
-                   "Frames whose images are decoded ahead of the SfM")
-      ->capture_default_str();
-  command->add_option("--frame-rate", o->frame_rate, "Timestamps of poses.tum: frame / rate")
-      ->capture_default_str();
   command->callback([o, &global] { RunReconstruct(*o, global); });
 }
 

@@ -142,9 +142,13 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       mesh.triangles.size(), report.IsOrientedManifold() ? "yes" : "NO", Quantile(ms, 0.5),
       Quantile(ms, 0.95), ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()), max_e,
       (out / "surface.ply").c_str(), (out / "stats" / "keyframes.csv").c_str());
-  if (!report.IsOrientedManifold()) {
+  if (mesh.triangles.empty()) {
+    ReportNotUsable((o.colmap.empty() ? o.from_gt : o.colmap) + ": the surface is empty (" +
+                    std::to_string(stream.size()) + " keyframes, " + std::to_string(added) +
+                    " points added)");
+  } else if (!report.IsOrientedManifold()) {
     spdlog::error("surface: the output is not an oriented 2-manifold: {}", report.Summary());
-    CommandExitCode() = 1;
+    CommandExitCode() = kExitCheckFailed;
   }
 }
 

@@ -29,7 +29,7 @@ struct ColmapModelStats {
 // Writes the three files into `folder` (created), each atomically. `image_name(frame, camera)`
 // names the image of a keyframe's frame. Points with no observation that projects are left out.
 // `colors`: empty (every point grey 128) or one RGB colour per point of `keyframes` in their
-// order, keyframe by keyframe (e.g. apps/pipeline/point_colors.h).
+// order, keyframe by keyframe (e.g. pipeline/point_colors.h).
 ColmapModelStats WriteColmapTextModel(
     const Rig& rig, const std::vector<FinalizedKeyframe>& keyframes,
     const std::function<std::string(int frame, int camera)>& image_name,

@@ -127,7 +127,7 @@ struct SculptorOptions {
   bool batch_init = true;
   // With a known scale, still buffer the first init_keyframes keyframes and sculpt them in one
   // batch (with batch_init): the re-sculpt of a map corrected by a loop closure keeps the first
-  // sculpting's s (apps/pipeline/). Otherwise a known scale sculpts each keyframe as it comes.
+  // sculpting's s (pipeline/). Otherwise a known scale sculpts each keyframe as it comes.
   bool batch_with_known_scale = false;
   // The conflict zones by default: on the paper drive (surface --from-gt) steps 1-5 take 0.55 to
   // 0.7 of the ball's time, with higher F-scores and fewer errors > 6 m (docs/design.md).

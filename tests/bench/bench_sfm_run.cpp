@@ -1,15 +1,14 @@
-// Speed of the whole SfM (issue 8: at least 15 frames/s of six 512×384 images on 2 cores) on a
-// synthetic drive: the image front end (sfm/track_builder.h: Harris + ZNCC) and the tracker
-// (sfm/tracker.h: resection, triangulation, local bundle adjustment) over every frame, as
-// `omnisculpt sfm` runs them, with the images decoded beforehand (loading is not measured).
+// Speed of the whole SfM on a synthetic drive: the SfM loop of `omnisculpt sfm` and
+// `omnisculpt reconstruct` (pipeline/sfm_runner.h: front end, tracker, re-localisation, loop
+// closure) over every frame, with the images decoded beforehand (loading is not measured).
 //
 // The drive: $OMNI_BENCH_SFM_DRIVE when set (e.g. /tmp/demo), otherwise the `short` preset
 // (130 frames) rendered once into a temporary folder; $OMNI_BENCH_SFM_FRAMES limits the frames
 // (0 or unset: all). Counters: frames/s and the seconds of each stage per run (wall time;
 // detection and matching run in parallel over the cameras).
 //
-//   BM_SfmRun        the whole SfM (front end with search regions by reprojection + tracker);
-//                    its figures move with the tracker's own changes.
+//   BM_SfmRun        the whole SfM loop (RunSfm, the commands' default options); its figures
+//                    move with the tracker's own changes.
 //   BM_FrontEndOnly  the front end alone, every frame matched against the previous one with
 //                    the constant image-motion model: fixed inputs for the Harris and ZNCC
 //                    kernels.
@@ -18,11 +17,6 @@
 
 #include <benchmark/benchmark.h>
 #include <spdlog/spdlog.h>
-
-#ifdef __GLIBC__
-#include <malloc.h>
-#endif
-
 #include <unistd.h>
 
 #include <cstdlib>
@@ -35,8 +29,8 @@
 #include "apps/synth/drive_writer.h"
 #include "apps/synth/synth_options.h"
 #include "calib/drive.h"
+#include "pipeline/sfm_runner.h"
 #include "sfm/track_builder.h"
-#include "sfm/tracker.h"
 
 namespace omni {
 namespace {
@@ -93,43 +87,27 @@ std::string Label(const BenchDrive& drive) {
 
 void BM_SfmRun(benchmark::State& state) {
   const BenchDrive& drive = Drive();
-  const Rig& rig = drive.rig;
-  TrackBuilderOptions track_options;
-  TrackerOptions tracker_options;
-  tracker_options.central = rig.central;
-  TrackBuilder::Timings front;
-  Tracker::Timings back;
-  int keyframes = 0, points = 0, untracked = 0;
-  for (auto _ : state) {
-    TrackBuilder builder(rig, track_options);
-    Tracker tracker(rig, tracker_options);
-    untracked = 0;
-    for (const std::vector<cv::Mat>& images : drive.frames) {
-      const TrackedFrame frame = builder.AddFrame(images, ReprojectionPredictor(tracker, rig));
-      const FrameResult result = tracker.AddFrame(frame.observations, builder.MapPointSearcher());
-      builder.SetFrameResult(result.tracked, result.keyframe);
-      benchmark::DoNotOptimize(tracker.TakeFinalized());
-      untracked += result.tracked ? 0 : 1;
-    }
-    tracker.Finish();
-    benchmark::DoNotOptimize(tracker.TakeFinalized());
-    front = builder.StageTimings();
-    back = tracker.StageTimings();
-    keyframes = tracker.NumKeyframes();
-    points = tracker.NumPoints();
-  }
+  SfmRunnerOptions options;
+  options.tracker.central = drive.rig.central;
+  SfmFrameSource source;
+  source.folder = drive.name;
+  source.num_frames = drive.frames.size();
+  source.load = [&drive](size_t frame) { return drive.frames[frame]; };
+  source.name = [](size_t frame) { return std::to_string(frame); };
+  SfmRunResult run;
+  for (auto _ : state) run = RunSfm(drive.rig, source, options);
   // Figures of the last run.
   const double frames = static_cast<double>(drive.frames.size());
   state.counters["frames/s"] =
       benchmark::Counter(frames * state.iterations(), benchmark::Counter::kIsRate);
-  state.counters["detect_s"] = front.detect;
-  state.counters["match_s"] = front.match;
-  state.counters["resect_s"] = back.resect;
-  state.counters["triangulate_s"] = back.triangulate;
-  state.counters["ba_s"] = back.bundle_adjustment;
-  state.counters["keyframes"] = keyframes;
-  state.counters["points"] = points;
-  state.counters["untracked"] = untracked;
+  state.counters["detect_s"] = run.front.detect;
+  state.counters["match_s"] = run.front.match;
+  state.counters["resect_s"] = run.back.resect;
+  state.counters["triangulate_s"] = run.back.triangulate;
+  state.counters["ba_s"] = run.back.bundle_adjustment;
+  state.counters["loop_s"] = run.loop_closure_seconds;
+  state.counters["keyframes"] = static_cast<double>(run.keyframes.size());
+  state.counters["untracked"] = static_cast<double>(run.frames_total - run.frames_tracked);
   state.SetLabel(Label(drive));
 }
 BENCHMARK(BM_SfmRun)->Unit(benchmark::kSecond)->UseRealTime()->Iterations(1);
@@ -165,12 +143,9 @@ BENCHMARK(BM_FrontEndOnly)->Unit(benchmark::kSecond)->UseRealTime()->Iterations(
 }  // namespace omni
 
 int main(int argc, char** argv) {
-#ifdef __GLIBC__
-  // As `omnisculpt sfm` does (apps/sfm_command.cpp): keep the per-frame image buffers in the
-  // heap rather than fresh mappings.
-  mallopt(M_MMAP_THRESHOLD, 256 << 20);
-  mallopt(M_TRIM_THRESHOLD, 512 << 20);
-#endif
+  // As the SfM loop does: the per-frame image buffers in the heap rather than fresh mappings
+  // (BM_FrontEndOnly gets it too).
+  omni::ConfigureAllocatorForSfm();
   spdlog::set_level(spdlog::level::warn);
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;

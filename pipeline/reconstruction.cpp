@@ -1,51 +1,32 @@
-#include "apps/pipeline/pipeline.h"
+#include "pipeline/reconstruction.h"
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <atomic>
-#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <exception>
 #include <memory>
 #include <sstream>
+#include <stdexcept>
 #include <thread>
 #include <unordered_map>
 
-#include "apps/pipeline/bounded_queue.h"
-#include "apps/pipeline/keyframe_conversion.h"
 #include "calib/error.h"
+#include "pipeline/bounded_queue.h"
+#include "pipeline/keyframe_conversion.h"
 
 namespace omni {
 
 std::string PipelineOptions::Check() const {
   for (const auto& [name, check] :
-       {std::pair<const char*, std::string>{"prefetch", prefetch.Check()},
-        {"tracks", tracks.Check()},
-        {"tracker", tracker.Check()},
-        {"sculptor", sculptor.Check()},
-        {"loop", loop.Check()}})
+       {std::pair<const char*, std::string>{"sfm", sfm.Check()}, {"sculptor", sculptor.Check()}})
     if (!check.empty()) return std::string(name) + "." + check;
   if (queue_capacity < 1) return "queue_capacity: expected at least 1";
-  if (max_frames < 0) return "max_frames: expected 0 (all) or more";
   if (snapshot_every < 0) return "snapshot_every: expected 0 (none) or more";
   if (!(progress_period > 0.0)) return "progress_period: expected a positive number of seconds";
   return {};
-}
-
-std::string PipelineFramesCsvHeader() {
-  return "frame,name,loaded,corners,matched,tracked,keyframe,inliers,ms,status";
-}
-
-std::string PipelineFramesCsvRow(const PipelineFrameRow& row) {
-  std::ostringstream o;
-  std::string status = row.result.status;
-  for (char& c : status)
-    if (c == ',' || c == '\n') c = ';';
-  o << row.frame << ',' << row.name << ',' << row.loaded << ',' << row.corners << ',' << row.matched
-    << ',' << row.result.tracked << ',' << row.result.keyframe << ',' << row.result.inliers << ','
-    << row.ms << ',' << status;
-  return o.str();
 }
 
 std::string PipelineKeyframesCsvHeader() { return KeyframeStatsCsvHeader() + ",queue_ms,replay"; }
@@ -87,12 +68,13 @@ struct QueuedKeyframe {
 
 PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
                            const PipelineCallbacks& callbacks) {
-  assert(options.Check().empty());
-  const Rig& rig = drive.rig();
+  if (const std::string problem = options.Check(); !problem.empty())
+    throw std::invalid_argument("PipelineOptions." + problem);
   PipelineResult result;
-  result.frames_total = options.max_frames > 0
-                            ? std::min<size_t>(drive.NumFrames(), options.max_frames)
-                            : drive.NumFrames();
+  const SfmFrameSource source = DriveFrameSource(drive);
+  const size_t frames_total = options.sfm.max_frames > 0
+                                  ? std::min<size_t>(source.num_frames, options.sfm.max_frames)
+                                  : source.num_frames;
   BoundedQueue<QueuedKeyframe> queue(static_cast<size_t>(options.queue_capacity));
   std::atomic<size_t> frames_done{0}, keyframes_sculpted{0}, triangles{0};
   std::atomic<int> num_keyframes{0}, num_points{0};
@@ -102,88 +84,23 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
 
   std::thread sfm_thread([&] {
     try {
-      TrackBuilder builder(rig, options.tracks);
-      Tracker tracker(rig, options.tracker);
-      std::unique_ptr<LoopCloser> closer;
-      if (options.loop_closure) closer = std::make_unique<LoopCloser>(rig, options.loop);
-      auto hand_over = [&] {
-        for (FinalizedKeyframe& keyframe : tracker.TakeFinalized()) {
-          queue.Push({{ToSurfaceKeyframe(keyframe)}, false, Clock::now()});
-          result.keyframes.push_back(std::move(keyframe));
-        }
+      SfmRunnerCallbacks sfm_callbacks;
+      sfm_callbacks.keyframe_finalised = [&queue](const FinalizedKeyframe& keyframe) {
+        queue.Push({{ToSurfaceKeyframe(keyframe)}, false, Clock::now()});
       };
-      // Stopped and joined when this scope ends (an abort, an error, or the last frame).
-      FramePrefetcher prefetcher(drive, result.frames_total, options.prefetch);
-      for (size_t f = 0; f < result.frames_total && !abort; ++f) {
-        const auto frame_start = Clock::now();
-        PipelineFrameRow row;
-        row.frame = f;
-        row.name = drive.FrameName(f);
-        std::optional<PrefetchedFrame> next = prefetcher.Next();
-        if (!next) break;  // cannot happen: the prefetcher delivers every frame until stopped
-        assert(next->frame == f);
-        std::vector<cv::Mat> images;
-        try {
-          next->Rethrow();
-          images = std::move(next->images);
-          row.loaded = true;
-        } catch (const InputError& error) {
-          result.skipped.push_back("frame " + row.name + " skipped: " + error.what());
-          spdlog::warn("{}", result.skipped.back());
-          row.result.status = "skipped: unreadable image";
-        }
-        result.load_seconds += SecondsSince(frame_start);
-        if (row.loaded) {
-          const TrackedFrame frame = builder.AddFrame(images, ReprojectionPredictor(tracker, rig));
-          row.corners = frame.num_corners;
-          row.matched = frame.num_matched;
-          row.result = tracker.AddFrame(frame.observations, builder.MapPointSearcher());
-          if (!row.result.tracked)
-            spdlog::warn("frame {}: not tracked ({})", row.name, row.result.status);
-          hand_over();
-          LoopClosureEvent event;
-          const auto loop_start = Clock::now();
-          std::vector<Rigid3d> poses_before;
-          if (closer && row.result.keyframe) poses_before = tracker.KeyframePoses();
-          const bool closed =
-              closer && row.result.keyframe && closer->AddKeyframe(images, frame, &tracker, &event);
-          if (closer && row.result.keyframe)
-            result.loop_closure_seconds += SecondsSince(loop_start);
-          if (closed) {
-            spdlog::info("reconstruct: {}", event.Summary());
-            result.loop_closures.push_back(event);
-            double rotation_deg = 0.0;
-            const std::vector<Rigid3d> poses_after = tracker.KeyframePoses();
-            const size_t k = static_cast<size_t>(event.keyframe);
-            if (k < poses_before.size() && k < poses_after.size())
-              rotation_deg =
-                  poses_after[k].rotation.angularDistance(poses_before[k].rotation) * 180.0 / M_PI;
-            result.loop_correction_rotation_deg.push_back(rotation_deg);
-            result.keyframes = tracker.FinalizedSnapshot();
-            queue.Push({ToSurfaceKeyframes(result.keyframes), true, Clock::now()});
-          }
-          num_keyframes = tracker.NumKeyframes();
-          num_points = tracker.NumPoints();
-        }
-        row.ms = 1e3 * SecondsSince(frame_start);
-        result.frames.push_back(std::move(row));
+      sfm_callbacks.map_corrected = [&queue](const std::vector<FinalizedKeyframe>& keyframes) {
+        queue.Push({ToSurfaceKeyframes(keyframes), true, Clock::now()});
+      };
+      sfm_callbacks.frame_done = [&](const SfmFrameRow&, int keyframes, int points) {
+        num_keyframes = keyframes;
+        num_points = points;
         ++frames_done;
-      }
-      if (!abort) {
-        tracker.Finish();
-        hand_over();
-        if (result.skipped.size() == result.frames_total)
-          throw InputError(drive.folder().string(), "images", "no frame could be read");
-        if (tracker.NumKeyframes() < 2)
-          throw InputError(drive.folder().string(), "images",
-                           "the SfM could not initialise (fewer than 2 keyframes)");
-      }
-      result.sfm_front = builder.StageTimings();
-      result.sfm_back = tracker.StageTimings();
+      };
+      sfm_callbacks.stop = [&abort] { return abort.load(); };
+      result.sfm = RunSfm(drive.rig(), source, options.sfm, sfm_callbacks);
     } catch (...) {
       sfm_error = std::current_exception();
     }
-    result.sfm_seconds = SecondsSince(start);
     queue.Close();  // the surface thread drains what is queued, then finishes
     sfm_done = true;
   });
@@ -247,7 +164,7 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
     if (!callbacks.progress) return;
     PipelineProgress progress;
     progress.frames_done = frames_done;
-    progress.frames_total = result.frames_total;
+    progress.frames_total = frames_total;
     progress.keyframes = num_keyframes;
     progress.points = num_points;
     progress.keyframes_sculpted = keyframes_sculpted;

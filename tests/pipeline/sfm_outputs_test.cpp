@@ -1,5 +1,5 @@
-// The SfM outputs shared by `omnisculpt sfm` and `reconstruct` (apps/pipeline/point_colors.h,
-// apps/pipeline/sfm_stats.h): point colours from a hand-made drive whose images have known
+// The SfM outputs shared by `omnisculpt sfm` and `reconstruct` (pipeline/point_colors.h,
+// pipeline/sfm_stats.h): point colours from a hand-made drive whose images have known
 // colours (linear in the pixel, so a bilinear sample is exact), and the statistics files.
 
 #include <gtest/gtest.h>
@@ -11,11 +11,11 @@
 #include <string>
 #include <vector>
 
-#include "apps/pipeline/point_colors.h"
-#include "apps/pipeline/sfm_stats.h"
 #include "calib/drive.h"
 #include "calib/error.h"
 #include "calib/rig_io.h"
+#include "pipeline/point_colors.h"
+#include "pipeline/sfm_stats.h"
 #include "tests/apps/run_omnisculpt.h"
 #include "tests/calib/io_temp_dir.h"
 

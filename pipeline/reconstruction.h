@@ -1,21 +1,18 @@
 #pragma once
-// The in-process pipeline of `omnisculpt reconstruct` (DESIGN.md §1): an SfM thread reads the
-// drive's frames, tracks them (sfm/track_builder.h, sfm/tracker.h) and hands every keyframe
-// that left the local adjustment window (its pose and points no longer move) through a bounded
-// queue to a surface thread running the incremental sculptor (surface/sculptor.h). The calling
-// thread reports progress. The images are decoded ahead on a thread of their own
-// (apps/pipeline/frame_prefetcher.h). A frame whose image cannot be read is reported and skipped.
+// The in-process pipeline of `omnisculpt reconstruct` (docs/design.md §1): an SfM thread runs
+// the SfM loop (pipeline/sfm_runner.h) over the drive's frames and hands every keyframe that
+// left the local adjustment window (its pose and points no longer move) through a bounded
+// queue to a surface thread running the incremental sculptor (surface/sculptor.h); after a
+// loop closure the corrected map follows through the same queue and the surface is sculpted
+// again from it. The calling thread reports progress.
 
 #include <functional>
 #include <string>
 #include <vector>
 
-#include "apps/pipeline/frame_prefetcher.h"
 #include "calib/drive.h"
 #include "calib/ply.h"
-#include "sfm/loop_closure.h"
-#include "sfm/track_builder.h"
-#include "sfm/tracker.h"
+#include "pipeline/sfm_runner.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -29,14 +26,10 @@ enum class LoopReplay {
 };
 
 struct PipelineOptions {
-  FramePrefetcherOptions prefetch;
-  TrackBuilderOptions tracks;
-  TrackerOptions tracker;
-  SculptorOptions sculptor;
-  // Loop closure (sfm/loop_closure.h): after a correction the surface thread replays the
+  // The SfM (pipeline/sfm_runner.h): after a loop correction the surface thread replays the
   // sculptor on the corrected finalised keyframes (the keyframes queued meanwhile wait).
-  bool loop_closure = true;
-  LoopClosureOptions loop;
+  SfmRunnerOptions sfm;
+  SculptorOptions sculptor;
   LoopReplay loop_replay = LoopReplay::kBatch;
   // Keyframes waiting between the SfM and the surface threads; a full queue stalls the SfM
   // (backpressure), so memory stays bounded however slow the surface is. A keyframe item is
@@ -44,21 +37,10 @@ struct PipelineOptions {
   // keyframes the SfM makes while the surface replays a corrected map (a replay item, the
   // whole map, is ~10 MB there).
   int queue_capacity = 32;
-  int max_frames = 0;            // 0: the whole drive
   int snapshot_every = 0;        // snapshot callback every K sculpted keyframes; 0: none
   double progress_period = 2.0;  // seconds between two progress callbacks
 
   std::string Check() const;
-};
-
-// One row per frame of the drive (stats/sfm_frames.csv, the columns of `omnisculpt sfm`).
-struct PipelineFrameRow {
-  size_t frame = 0;
-  std::string name;
-  bool loaded = false;  // false: an image could not be read, the frame was skipped
-  int corners = 0, matched = 0;
-  FrameResult result;
-  double ms = 0.0;  // reading, tracking and, for a keyframe, the local adjustment
 };
 
 // One row per call of the sculptor that processed keyframes (the batch initialisation is one
@@ -84,32 +66,22 @@ struct PipelineCallbacks {
 };
 
 struct PipelineResult {
-  std::vector<FinalizedKeyframe> keyframes;  // every keyframe, in order, final poses and points
+  SfmRunResult sfm;  // keyframes (final poses and points), frame rows, loop closures, timings
   TriangleMesh mesh;
-  std::vector<PipelineFrameRow> frames;
   std::vector<PipelineKeyframeRow> surface_rows;
-  std::vector<std::string> skipped;  // one message per skipped frame
-  size_t frames_total = 0;
-  double seconds = 0.0, sfm_seconds = 0.0, surface_seconds = 0.0;
+  double seconds = 0.0, surface_seconds = 0.0;
   size_t queue_max_size = 0, queue_blocked_pushes = 0;
   double queue_blocked_seconds = 0.0;
-  std::vector<LoopClosureEvent> loop_closures;
-  // Per loop closure: the rotation the correction applied to the revisiting keyframe (degrees),
-  // and the surface time of the replay that followed it.
-  std::vector<double> loop_correction_rotation_deg;
+  // Per loop closure: the surface time of the replay that followed it and the keyframes it
+  // re-sculpted.
   std::vector<double> loop_replay_seconds;
-  std::vector<size_t> loop_replay_keyframes;  // keyframes re-sculpted by each replay
-  double replay_seconds = 0.0;                // surface time spent replaying after corrections
-  // SfM time per stage (wall seconds; the SfM thread's): reading the images, detection and
-  // matching, resection, triangulation, local adjustment, and loop detection and correction.
-  double load_seconds = 0.0;  // waiting for the prefetcher's next decoded frame
-  TrackBuilder::Timings sfm_front;
-  Tracker::Timings sfm_back;
-  double loop_closure_seconds = 0.0;
+  std::vector<size_t> loop_replay_keyframes;
+  double replay_seconds = 0.0;  // surface time spent replaying after corrections
 };
 
-// Runs the pipeline to the end of the drive. Throws InputError when the SfM cannot initialise
-// or every frame was skipped; rethrows, on the calling thread, what a stage thread threw.
+// Runs the pipeline to the end of the drive. Throws InputError when every frame was skipped
+// and OptionsError for bad options; rethrows, on the calling thread, what a stage thread threw.
+// A run whose SfM is not usable (result.sfm.outcome) still returns, with what was done.
 PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
                            const PipelineCallbacks& callbacks = {});
 
@@ -119,8 +91,6 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
 SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mode, double scale,
                                       size_t keyframes);
 
-std::string PipelineFramesCsvHeader();
-std::string PipelineFramesCsvRow(const PipelineFrameRow& row);
 // KeyframeStatsCsvHeader() and the pipeline's columns (queue_ms).
 std::string PipelineKeyframesCsvHeader();
 std::string PipelineKeyframesCsvRow(const PipelineKeyframeRow& row);

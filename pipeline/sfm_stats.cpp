@@ -1,4 +1,4 @@
-#include "apps/pipeline/sfm_stats.h"
+#include "pipeline/sfm_stats.h"
 
 #include <algorithm>
 #include <sstream>
@@ -68,7 +68,8 @@ std::string SfmSummaryCsv(const SfmStats& s) {
       << "mean_rays_per_point," << s.tracks.mean_rays << '\n'
       << "multi_camera_points_share," << s.tracks.multi_camera_share << '\n'
       << "aperture_ok_share," << s.tracks.aperture_ok_share << '\n'
-      << "frames_per_second," << s.frames / std::max(s.total_seconds, 1e-9) << '\n';
+      << "frames_per_second," << s.frames / std::max(s.total_seconds, 1e-9) << '\n'
+      << "usable," << s.usable << '\n';
   return csv.str();
 }
 

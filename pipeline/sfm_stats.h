@@ -1,10 +1,11 @@
 #pragma once
-// The SfM statistics files of `omnisculpt sfm` and `omnisculpt reconstruct` (issues 8, 9), one
-// writer for both:
+// The SfM statistics files of `omnisculpt sfm` and `omnisculpt reconstruct`, one writer for
+// both:
 //   stats/sfm_stages.csv   stage,seconds,ms_per_frame: wall seconds per SfM stage, "other"
 //                          the rest of the SfM's time, "total" the sum
 //   stats/sfm_summary.csv  name,value: frames, tracking, keyframes, points, observations,
-//                          reprojection error, frames/s of the SfM
+//                          reprojection error, frames/s of the SfM, and
+//                          usable (1, or 0 when the SfM did not initialise or lost tracking)
 
 #include <filesystem>
 #include <string>
@@ -36,6 +37,7 @@ struct SfmStats {
   double loop_closure_seconds = 0.0;  // detection, correction, global adjustment (reconstruct)
   double queue_wait_seconds = 0.0;    // the SfM blocked on a full surface queue (reconstruct)
   double total_seconds = 0.0;         // the whole SfM, from the first frame to the last keyframe
+  bool usable = true;                 // the run gave a usable map (pipeline/sfm_runner.h)
 
   void AddFrame(bool loaded, int matched, const FrameResult& result);
 };

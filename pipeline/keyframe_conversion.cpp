@@ -1,4 +1,4 @@
-#include "apps/pipeline/keyframe_conversion.h"
+#include "pipeline/keyframe_conversion.h"
 
 namespace omni {
 

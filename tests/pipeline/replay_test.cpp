@@ -1,4 +1,4 @@
-// The surface after a loop closure in `omnisculpt reconstruct` (issue 9): the corrected map is
+// The surface after a loop closure in `omnisculpt reconstruct`: the corrected map is
 // re-sculpted in one batch at the scale s of the first sculpting (LoopReplay::kBatch), or one by
 // one from scratch (kIncremental), and either way δO is an oriented 2-manifold.
 
@@ -6,7 +6,7 @@
 
 #include <Eigen/Geometry>
 
-#include "apps/pipeline/pipeline.h"
+#include "pipeline/reconstruction.h"
 #include "surface/manifold_check.h"
 #include "surface/sculptor.h"
 #include "tests/surface/step6_scenes.h"

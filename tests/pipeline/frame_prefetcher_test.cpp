@@ -1,6 +1,8 @@
-// The frame prefetcher of `omnisculpt reconstruct` and `omnisculpt sfm` (issue 9,
-// apps/pipeline/frame_prefetcher.h): frames in order, a frame's reading error delivered with it,
+// The frame prefetcher of `omnisculpt reconstruct` and `omnisculpt sfm`
+// (pipeline/frame_prefetcher.h): frames in order, a frame's reading error delivered with it,
 // never more than frames_ahead frames decoded ahead of the consumer, a clean early stop.
+
+#include "pipeline/frame_prefetcher.h"
 
 #include <gtest/gtest.h>
 
@@ -9,7 +11,6 @@
 #include <stdexcept>
 #include <thread>
 
-#include "apps/pipeline/frame_prefetcher.h"
 #include "calib/error.h"
 
 namespace omni {

@@ -1,4 +1,4 @@
-#include "apps/pipeline/frame_prefetcher.h"
+#include "pipeline/frame_prefetcher.h"
 
 #include <algorithm>
 #include <cassert>

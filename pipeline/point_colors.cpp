@@ -1,4 +1,4 @@
-#include "apps/pipeline/point_colors.h"
+#include "pipeline/point_colors.h"
 
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>

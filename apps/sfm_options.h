@@ -1,0 +1,31 @@
+#pragma once
+// The SfM options that `omnisculpt sfm` and `omnisculpt reconstruct` share, registered once.
+
+#include <CLI/CLI.hpp>
+#include <string>
+
+#include "calib/rig.h"
+#include "pipeline/sfm_runner.h"
+
+namespace omni {
+
+struct SfmCommandLine {
+  bool central = false;      // --central: force the central approximation
+  bool non_central = false;  // --non-central: force the true camera offsets
+  double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
+  // Central mode treats the camera centres as one point: a camera offset d seen at depth z
+  // bends the rays by about d / z radians. The map's scale is unknown in central mode, so the
+  // depth is the user's (metres; street facades are 5-20 m away); above this ratio of the
+  // largest offset to it, the log says the non-central mode is the right one.
+  double scene_depth = 10.0;
+  double max_central_offset_ratio = 0.01;
+  SfmRunnerOptions sfm;
+};
+
+// Adds the SfM group to `command` (the values land in *options, which must outlive it).
+void AddSfmOptions(CLI::App* command, SfmCommandLine* options);
+// Checks the group (InputError naming the option), sets the mode from the flags or the rig's
+// own `central`, and logs the mode (a warning when the central mode bends the rays too much).
+void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommandLine* options);
+
+}  // namespace omni

@@ -1,0 +1,75 @@
+#include "pipeline/sfm_outputs.h"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "calib/atomic_file.h"
+#include "calib/tum.h"
+#include "sfm/colmap_model.h"
+
+namespace omni {
+
+std::string SfmOutputOptions::Check() const {
+  if (!(frame_rate > 0.0) || !std::isfinite(frame_rate))
+    return "frame_rate: expected a positive rate";
+  if (!(queue_wait_seconds >= 0.0)) return "queue_wait_seconds: expected 0 or more";
+  return {};
+}
+
+SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
+                           const std::filesystem::path& folder, const SfmOutputOptions& options) {
+  if (const std::string problem = options.Check(); !problem.empty())
+    throw std::invalid_argument("SfmOutputOptions." + problem);
+  const Rig& rig = drive.rig();
+  SfmOutputs outputs;
+  std::filesystem::create_directories(folder / "stats");
+  std::vector<StampedPose> poses;
+  for (const FinalizedKeyframe& keyframe : run.keyframes) {
+    poses.push_back({keyframe.frame / options.frame_rate, keyframe.world_from_rig});
+    for (const FinalizedPoint& point : keyframe.points)
+      outputs.cloud.points.push_back(point.position);
+  }
+  // Point colours from the keyframe images (the SfM reads grey images only).
+  outputs.cloud.colors = ColorPoints(
+      rig, run.keyframes, [&drive](int frame, int camera) { return drive.LoadRgb(frame, camera); },
+      {}, &outputs.colors);
+  ColmapModelStats colmap;
+  if (run.outcome != SfmOutcome::kNotInitialised) {
+    // No map files without a map: the stats say what happened.
+    WriteTum(poses, folder / "poses.tum");
+    WritePlyPoints(outputs.cloud, folder / "points.ply");
+    colmap = WriteColmapTextModel(
+        rig, run.keyframes,
+        [&drive](int frame, int camera) {
+          return std::filesystem::relative(drive.ImagePath(frame, camera), drive.folder())
+              .generic_string();
+        },
+        folder / "sparse", outputs.cloud.colors);
+  }
+
+  std::ostringstream frames_csv;
+  frames_csv << SfmFramesCsvHeader() << '\n';
+  for (const SfmFrameRow& row : run.frames) frames_csv << SfmFramesCsvRow(row) << '\n';
+  WriteTextFileAtomically(folder / "stats" / "sfm_frames.csv", frames_csv.str());
+
+  SfmStats& stats = outputs.stats;
+  for (const SfmFrameRow& row : run.frames) stats.AddFrame(row.loaded, row.matched, row.result);
+  stats.keyframes = run.keyframes.size();
+  stats.points = outputs.cloud.points.size();
+  stats.colmap = colmap;
+  stats.tracks = ComputeTrackStats(run.keyframes);
+  stats.front = run.front;
+  stats.back = run.back;
+  stats.load_seconds = run.load_seconds;
+  stats.loop_closure_seconds = run.loop_closure_seconds;
+  stats.queue_wait_seconds = options.queue_wait_seconds;
+  stats.total_seconds = run.seconds;
+  stats.usable = run.outcome == SfmOutcome::kUsable;
+  WriteSfmStats(stats, folder / "stats");
+  return outputs;
+}
+
+}  // namespace omni

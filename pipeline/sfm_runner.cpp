@@ -1,0 +1,268 @@
+#include "pipeline/sfm_runner.h"
+
+#include <spdlog/spdlog.h>
+
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
+
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include "calib/error.h"
+
+namespace omni {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+}  // namespace
+
+std::string SfmRunnerOptions::Check() const {
+  for (const auto& [name, check] :
+       {std::pair<const char*, std::string>{"prefetch", prefetch.Check()},
+        {"tracks", tracks.Check()},
+        {"tracker", tracker.Check()},
+        {"loop", loop.Check()}})
+    if (!check.empty()) return std::string(name) + "." + check;
+  if (max_frames < 0) return "max_frames: expected 0 (all) or more";
+  if (!(usable_tracked_frames_share >= 0.0 && usable_tracked_frames_share <= 1.0))
+    return "usable_tracked_frames_share: expected a share in [0, 1]";
+  return {};
+}
+
+std::string SfmFramesCsvHeader() {
+  return "frame,name,loaded,corners,matched,predicted,relocalising,tracked,keyframe,inliers,ms,"
+         "status";
+}
+
+std::string SfmFramesCsvRow(const SfmFrameRow& row) {
+  std::string status = row.result.status;
+  for (char& c : status)
+    if (c == ',' || c == '\n') c = ';';
+  std::ostringstream o;
+  o << row.frame << ',' << row.name << ',' << row.loaded << ',' << row.corners << ',' << row.matched
+    << ',' << row.predicted << ',' << row.relocalising << ',' << row.result.tracked << ','
+    << row.result.keyframe << ',' << row.result.inliers << ',' << row.ms << ',' << status;
+  return o.str();
+}
+
+const char* SfmOutcomeName(SfmOutcome outcome) {
+  switch (outcome) {
+    case SfmOutcome::kUsable:
+      return "usable";
+    case SfmOutcome::kNotInitialised:
+      return "not_initialised";
+    case SfmOutcome::kTrackingLost:
+      return "tracking_lost";
+  }
+  return "unknown";
+}
+
+void ConfigureAllocatorForSfm() {
+#ifdef __GLIBC__
+  static std::once_flag once;
+  std::call_once(once, [] {
+    mallopt(M_MMAP_THRESHOLD, 256 << 20);
+    mallopt(M_TRIM_THRESHOLD, 512 << 20);
+  });
+#endif
+}
+
+SfmFrameSource DriveFrameSource(const Drive& drive) {
+  SfmFrameSource source;
+  source.folder = drive.folder().string();
+  source.num_frames = drive.NumFrames();
+  source.load = [&drive](size_t frame) {
+    std::vector<cv::Mat> images;
+    for (size_t c = 0; c < drive.rig().NumCameras(); ++c)
+      images.push_back(drive.LoadGray(frame, c));
+    return images;
+  };
+  source.name = [&drive](size_t frame) { return drive.FrameName(frame); };
+  return source;
+}
+
+struct SfmRunner::Impl {
+  Impl(const Rig& rig_, const SfmRunnerOptions& options_, const SfmRunnerCallbacks& callbacks_)
+      : rig(rig_),
+        options(options_),
+        callbacks(callbacks_),
+        builder(rig_, options_.tracks),
+        tracker(rig_, options_.tracker) {
+    if (options.loop_closure) closer = std::make_unique<LoopCloser>(rig, options.loop);
+  }
+
+  void HandOver() {
+    for (FinalizedKeyframe& keyframe : tracker.TakeFinalized()) {
+      if (callbacks.keyframe_finalised) callbacks.keyframe_finalised(keyframe);
+      result.keyframes.push_back(std::move(keyframe));
+    }
+  }
+
+  const Rig& rig;
+  const SfmRunnerOptions options;
+  const SfmRunnerCallbacks callbacks;
+  TrackBuilder builder;
+  Tracker tracker;
+  std::unique_ptr<LoopCloser> closer;
+  SfmRunResult result;
+  Clock::time_point start = Clock::now();
+};
+
+SfmRunner::SfmRunner(const Rig& rig, const SfmRunnerOptions& options,
+                     const SfmRunnerCallbacks& callbacks) {
+  if (const std::string problem = options.Check(); !problem.empty())
+    throw std::invalid_argument("SfmRunnerOptions." + problem);
+  impl_ = std::make_unique<Impl>(rig, options, callbacks);
+}
+
+SfmRunner::~SfmRunner() = default;
+
+const Tracker& SfmRunner::tracker() const { return impl_->tracker; }
+
+const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string& name,
+                                       double wait_seconds) {
+  Impl& s = *impl_;
+  SfmRunResult& result = s.result;
+  const auto frame_start = Clock::now();
+  SfmFrameRow row;
+  row.frame = frame.frame;
+  row.name = name;
+  result.load_seconds += wait_seconds;
+  if (frame.error) {
+    try {
+      frame.Rethrow();
+    } catch (const InputError& error) {
+      result.skipped.push_back("frame " + name + " skipped: " + error.what());
+      spdlog::warn("{}", result.skipped.back());
+      row.result.status = "skipped: unreadable image";
+    }
+  } else {
+    row.loaded = true;
+    const TrackedFrame tracked =
+        s.builder.AddFrame(frame.images, ReprojectionPredictor(s.tracker, s.rig));
+    row.corners = tracked.num_corners;
+    row.matched = tracked.num_matched;
+    row.predicted = tracked.num_predicted;
+    row.relocalising = tracked.relocalising;
+    row.result = s.tracker.AddFrame(tracked.observations, s.builder.MapPointSearcher());
+    s.builder.SetFrameResult(row.result.tracked, row.result.keyframe);
+    if (row.result.tracked) {
+      ++result.frames_tracked;
+    } else {
+      spdlog::warn("frame {}: not tracked ({}){}", name, row.result.status,
+                   tracked.relocalising ? ", re-localising against the last keyframe" : "");
+    }
+    s.HandOver();
+    if (s.closer && row.result.keyframe) {
+      const auto loop_start = Clock::now();
+      const std::vector<Rigid3d> poses_before = s.tracker.KeyframePoses();
+      LoopClosureEvent event;
+      const bool closed = s.closer->AddKeyframe(frame.images, tracked, &s.tracker, &event);
+      result.loop_closure_seconds += SecondsSince(loop_start);
+      if (closed) {
+        spdlog::info("sfm: {}", event.Summary());
+        SfmLoopClosure closure;
+        closure.event = event;
+        const std::vector<Rigid3d> poses_after = s.tracker.KeyframePoses();
+        const size_t k = static_cast<size_t>(event.keyframe);
+        if (k < poses_before.size() && k < poses_after.size())
+          closure.correction_rotation_deg =
+              poses_after[k].rotation.angularDistance(poses_before[k].rotation) * 180.0 / M_PI;
+        result.loop_closures.push_back(closure);
+        result.keyframes = s.tracker.FinalizedSnapshot();
+        if (s.callbacks.map_corrected) s.callbacks.map_corrected(result.keyframes);
+      }
+    }
+  }
+  // Where the untracked tail of the input begins (a frame tracked resets it).
+  if (row.result.tracked) result.lost_from = row.frame + 1;
+  row.ms = 1e3 * (wait_seconds + SecondsSince(frame_start));
+  result.frames.push_back(std::move(row));
+  ++result.frames_total;
+  const SfmFrameRow& done = result.frames.back();
+  if (s.callbacks.frame_done)
+    s.callbacks.frame_done(done, s.tracker.NumKeyframes(), s.tracker.NumPoints());
+  return done;
+}
+
+SfmRunResult SfmRunner::Finish() {
+  Impl& s = *impl_;
+  s.tracker.Finish();
+  s.HandOver();
+  SfmRunResult& result = s.result;
+  result.front = s.builder.StageTimings();
+  result.back = s.tracker.StageTimings();
+  result.seconds = SecondsSince(s.start);
+  const size_t read = result.frames_total - result.skipped.size();
+  const size_t lost_tail = result.frames_total - std::min(result.lost_from, result.frames_total);
+  if (s.tracker.NumKeyframes() < 2) {
+    result.outcome = SfmOutcome::kNotInitialised;
+    std::ostringstream why;
+    why << "the SfM could not initialise (fewer than 2 keyframes; " << result.frames_tracked
+        << " of " << read << " frames read were tracked)";
+    result.outcome_reason = why.str();
+  } else if (static_cast<double>(result.frames_tracked) <
+             s.options.usable_tracked_frames_share * static_cast<double>(read)) {
+    result.outcome = SfmOutcome::kTrackingLost;
+    std::ostringstream why;
+    why << "tracking was lost: " << result.frames_tracked << " of " << read
+        << " frames read were tracked";
+    if (lost_tail > 0 && result.lost_from < result.frames.size())
+      why << ", none from frame " << result.frames[result.lost_from].name << " on";
+    why << " (below " << 100.0 * s.options.usable_tracked_frames_share << " %)";
+    result.outcome_reason = why.str();
+  } else {
+    result.outcome = SfmOutcome::kUsable;
+    std::ostringstream what;
+    what << result.frames_tracked << " of " << read << " frames read were tracked";
+    if (lost_tail > 0 && result.lost_from < result.frames.size())
+      what << "; tracking was lost from frame " << result.frames[result.lost_from].name
+           << " to the end (" << lost_tail << " frames)";
+    result.outcome_reason = what.str();
+    if (lost_tail > 0) spdlog::warn("sfm: {}", result.outcome_reason);
+  }
+  return std::move(result);
+}
+
+SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunnerOptions& options,
+                    const SfmRunnerCallbacks& callbacks) {
+  ConfigureAllocatorForSfm();
+  SfmRunner runner(rig, options, callbacks);
+  const size_t num_frames = options.max_frames > 0
+                                ? std::min<size_t>(source.num_frames, options.max_frames)
+                                : source.num_frames;
+  bool stopped = false;
+  {
+    // Stopped and joined when this scope ends (a stop, an error, or the last frame).
+    FramePrefetcher prefetcher(num_frames, source.load, options.prefetch);
+    for (size_t f = 0; f < num_frames; ++f) {
+      if (callbacks.stop && callbacks.stop()) {
+        stopped = true;
+        break;
+      }
+      const auto wait_start = Clock::now();
+      std::optional<PrefetchedFrame> next = prefetcher.Next();
+      if (!next) break;  // cannot happen: the prefetcher delivers every frame until stopped
+      const double waited = SecondsSince(wait_start);
+      runner.AddFrame(std::move(*next), source.name(f), waited);
+    }
+  }
+  SfmRunResult result = runner.Finish();
+  if (stopped) return result;
+  if (!result.frames.empty() && result.skipped.size() == result.frames.size())
+    throw InputError(source.folder, "images", "no frame could be read");
+  return result;
+}
+
+}  // namespace omni

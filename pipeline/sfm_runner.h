@@ -1,0 +1,158 @@
+#pragma once
+// The one per-frame SfM loop of `omnisculpt sfm`, `omnisculpt reconstruct` and the SfM
+// benchmark. For each frame, in order: the prefetched images (pipeline/frame_prefetcher.h; a
+// frame whose image cannot be read is reported and skipped) → the image front end
+// (sfm/track_builder.h, search regions by reprojection once the pose is predicted) → the tracker
+// (sfm/tracker.h: resection, triangulation, keyframes, local bundle adjustment) → what the
+// tracker made of the frame back to the front end (a keyframe becomes the reference of a later
+// re-localisation; after a frame not tracked the next ones are matched against it) → the loop
+// closer on each new keyframe (sfm/loop_closure.h) → the keyframes that left the local window,
+// handed over in order. One row per frame (stats/sfm_frames.csv) and the run's outcome: did it
+// give a usable map, and if not, why.
+
+#include <cstddef>
+#include <functional>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "calib/drive.h"
+#include "calib/rig.h"
+#include "pipeline/frame_prefetcher.h"
+#include "sfm/loop_closure.h"
+#include "sfm/track_builder.h"
+#include "sfm/tracker.h"
+
+namespace omni {
+
+struct SfmRunnerOptions {
+  FramePrefetcherOptions prefetch;
+  TrackBuilderOptions tracks;
+  TrackerOptions tracker;
+  // Revisits recognised among the old keyframes, verified, and the map corrected (pose graph
+  // and global bundle adjustment); the corrected finalised keyframes are handed over again.
+  bool loop_closure = true;
+  LoopClosureOptions loop;
+  int max_frames = 0;  // 0: every frame of the input
+  // A run is usable when the SfM initialised and at least this share of the frames read was
+  // tracked; below it the map covers too little of the drive (tracking was lost for good).
+  double usable_tracked_frames_share = 0.5;
+
+  // "" or the first bad field ("tracker.keyframes.min_tracked_share: expected ...").
+  std::string Check() const;
+};
+
+// One row per frame of the input (stats/sfm_frames.csv).
+struct SfmFrameRow {
+  size_t frame = 0;
+  std::string name;
+  bool loaded = false;  // false: an image could not be read, the frame was skipped
+  int corners = 0, matched = 0, predicted = 0;
+  bool relocalising = false;  // matched against the last keyframe after a lost frame
+  FrameResult result;
+  double ms = 0.0;  // waiting for the images, tracking and, for a keyframe, the local
+                    // adjustment and the loop closer
+};
+
+std::string SfmFramesCsvHeader();
+std::string SfmFramesCsvRow(const SfmFrameRow& row);
+
+// A loop closure and the rotation its correction applied to the revisiting keyframe.
+struct SfmLoopClosure {
+  LoopClosureEvent event;
+  double correction_rotation_deg = 0.0;
+};
+
+// Whether the run gave a map to use. Anything but kUsable is a failed run (the commands say
+// why on stderr and exit with a code of their own, apps/commands.h).
+enum class SfmOutcome {
+  kUsable,
+  kNotInitialised,  // fewer than two keyframes: no map
+  kTrackingLost,    // a map, but fewer than usable_tracked_frames_share of the frames
+                    // read were tracked
+};
+
+struct SfmRunResult {
+  std::vector<FinalizedKeyframe> keyframes;  // every keyframe, in order, final poses and points
+  std::vector<SfmFrameRow> frames;
+  std::vector<std::string> skipped;  // one message per unreadable frame
+  std::vector<SfmLoopClosure> loop_closures;
+  size_t frames_total = 0;  // frames of the run (max_frames applied)
+  size_t frames_tracked = 0;
+  // The first frame of the last run of untracked frames that lasts to the end of the input
+  // (frames_total when the last frame read was tracked).
+  size_t lost_from = 0;
+  SfmOutcome outcome = SfmOutcome::kNotInitialised;
+  std::string outcome_reason;  // one line: what happened, for stderr and the run's summary
+
+  // Wall seconds of the SfM thread: waiting for decoded images, the front end, the tracker's
+  // stages, loop detection and correction, and the whole run.
+  double load_seconds = 0.0;
+  TrackBuilder::Timings front;
+  Tracker::Timings back;
+  double loop_closure_seconds = 0.0;
+  double seconds = 0.0;
+};
+
+// What the runner reads: frames in order, each the images of every camera (throws InputError
+// when one cannot be read) and its name.
+struct SfmFrameSource {
+  std::string folder;  // named in errors
+  size_t num_frames = 0;
+  FramePrefetcher::Loader load;  // 8-bit grey images, one per camera
+  std::function<std::string(size_t frame)> name;
+};
+// The grey images and frame names of `drive`, which must outlive the source.
+SfmFrameSource DriveFrameSource(const Drive& drive);
+
+struct SfmRunnerCallbacks {
+  // On the runner's thread, in order: a keyframe that left the local window (its pose and
+  // points no longer move).
+  std::function<void(const FinalizedKeyframe&)> keyframe_finalised;
+  // On the runner's thread, after a loop closure corrected the map: every keyframe finalised
+  // so far, rebuilt from the corrected map (the later keyframe_finalised calls continue it).
+  std::function<void(const std::vector<FinalizedKeyframe>&)> map_corrected;
+  // On the runner's thread, after each frame (its row), with the tracker's counts.
+  std::function<void(const SfmFrameRow&, int keyframes, int points)> frame_done;
+  // Polled before each frame: true stops the run (no outcome checks, no Finish()).
+  std::function<bool()> stop;
+};
+
+// The per-frame step, for callers that feed frames themselves; RunSfm is the loop over a
+// source. Throws OptionsError for bad options.
+class SfmRunner {
+ public:
+  SfmRunner(const Rig& rig, const SfmRunnerOptions& options,
+            const SfmRunnerCallbacks& callbacks = {});
+  ~SfmRunner();
+  SfmRunner(const SfmRunner&) = delete;
+  SfmRunner& operator=(const SfmRunner&) = delete;
+
+  // One frame: `frame.images` (one per camera) or `frame.error` (the frame is skipped).
+  // `wait_seconds` is the time spent waiting for its images (counted in its row).
+  const SfmFrameRow& AddFrame(PrefetchedFrame frame, const std::string& name,
+                              double wait_seconds = 0.0);
+  // End of the input: finalises the keyframes still in the window and decides the outcome.
+  // Throws InputError when no frame could be read.
+  SfmRunResult Finish();
+
+  const Tracker& tracker() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Runs the SfM over every frame of `source` (max_frames applied), the images decoded ahead on
+// their own thread. Stopped early by callbacks.stop (the result then holds what was done).
+SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunnerOptions& options,
+                    const SfmRunnerCallbacks& callbacks = {});
+
+// The process's allocator set for the SfM (once; glibc only): every frame allocates and frees
+// the same large image buffers (Harris responses, pyramids); above glibc's default mmap
+// threshold each is a fresh mapping, and the page faults cost about half of the detection time.
+void ConfigureAllocatorForSfm();
+
+const char* SfmOutcomeName(SfmOutcome outcome);
+
+}  // namespace omni

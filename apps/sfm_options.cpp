@@ -36,7 +36,7 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "Typical scene depth (m), for the warning on large camera offsets in central "
                    "mode")
       ->capture_default_str();
-  command->add_option("--frame-rate", o->frame_rate, "Timestamps of poses.tum: frame / rate")
+  command->add_option("--frame-rate", o->frame_rate, "Timestamps of poses.tum: frame / rate (when the drive has no frames.csv)")
       ->capture_default_str();
 }
 

@@ -4,9 +4,12 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
+#include <fstream>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 #include <system_error>
 
 #include "calib/error.h"
@@ -217,6 +220,9 @@ Drive Drive::Open(const std::filesystem::path& folder, const DriveOptions& optio
                  drive.incomplete_frames_.size(), JoinWords(examples, "; "));
   }
 
+  if (std::filesystem::exists(folder / "frames.csv", error))
+    drive.timestamps_ = ReadFrameTimestamps(folder / "frames.csv", drive.frame_names_);
+
   if (static_cast<int>(drive.frame_names_.size()) < options.min_frames) {
     throw InputError(folder, "",
                      "drive too short: " + std::to_string(drive.frame_names_.size()) +
@@ -224,6 +230,72 @@ Drive Drive::Open(const std::filesystem::path& folder, const DriveOptions& optio
                          " needed");
   }
   return drive;
+}
+
+std::vector<double> ReadFrameTimestamps(const std::filesystem::path& frames_csv,
+                                        const std::vector<std::string>& frame_names) {
+  std::ifstream in(frames_csv);
+  if (!in) throw InputError(frames_csv, "", "cannot be read");
+  auto split = [](const std::string& line) {
+    std::vector<std::string> fields;
+    std::string field;
+    std::istringstream stream(line);
+    while (std::getline(stream, field, ',')) {
+      while (!field.empty() && (field.back() == '\r' || field.back() == ' ')) field.pop_back();
+      while (!field.empty() && field.front() == ' ') field.erase(field.begin());
+      fields.push_back(field);
+    }
+    return fields;
+  };
+  std::string line;
+  if (!std::getline(in, line)) throw InputError(frames_csv, "line 1", "empty (expected a header)");
+  const std::vector<std::string> header = split(line);
+  auto column = [&](const std::string& name) {
+    const auto it = std::find(header.begin(), header.end(), name);
+    if (it == header.end())
+      throw InputError(frames_csv, "line 1",
+                       "no column \"" + name + "\" (expected frame,camera,timestamp_s)");
+    return static_cast<size_t>(it - header.begin());
+  };
+  const size_t frame_column = column("frame"), time_column = column("timestamp_s");
+  column("camera");
+  std::map<std::string, std::pair<double, int>> sums;  // frame -> (sum, rows)
+  for (int number = 2; std::getline(in, line); ++number) {
+    if (line.empty() || line == "\r") continue;
+    const std::vector<std::string> fields = split(line);
+    const std::string where = "line " + std::to_string(number);
+    if (fields.size() <= std::max(frame_column, time_column))
+      throw InputError(frames_csv, where, "expected " + std::to_string(header.size()) + " fields");
+    const std::string& text = fields[time_column];
+    // A plain decimal number (no hexadecimal, no inf or nan).
+    const bool decimal =
+        !text.empty() && text.find_first_not_of("0123456789.-+eE") == std::string::npos;
+    double value = 0.0;
+    size_t used = 0;
+    try {
+      value = decimal ? std::stod(text, &used) : 0.0;
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (!decimal || used != text.size() || !std::isfinite(value))
+      throw InputError(frames_csv, where,
+                       "timestamp_s: expected a decimal number of seconds, got \"" + text + "\"");
+    auto& [sum, rows] = sums[fields[frame_column]];
+    sum += value;
+    ++rows;
+  }
+  std::vector<double> timestamps;
+  for (const std::string& frame : frame_names) {
+    const auto it = sums.find(frame);
+    if (it == sums.end()) throw InputError(frames_csv, "", "no row for frame \"" + frame + "\"");
+    timestamps.push_back(it->second.first / it->second.second);
+    if (timestamps.size() > 1 && !(timestamps.back() > timestamps[timestamps.size() - 2]))
+      throw InputError(frames_csv, "",
+                       "timestamps must increase: frame \"" + frame +
+                           "\" is not after the one "
+                           "before it");
+  }
+  return timestamps;
 }
 
 std::filesystem::path Drive::ImagePath(size_t frame, size_t camera) const {

@@ -3,6 +3,12 @@
 //   drive/rig.json
 //   drive/images/<camera name>/<frame>.png|jpg     same frame names in every camera folder
 //   drive/gt/poses.tum, drive/gt/mesh.ply           optional ground truth
+//   drive/frames.csv                                optional per-frame timestamps
+// frames.csv: a header naming at least the columns frame, camera and timestamp_s (seconds, a
+// decimal number; other columns are ignored), then one row per image (frame name, camera name,
+// its timestamp). A frame's timestamp is the mean of its cameras' rows (the cameras are
+// synchronised); the frames' timestamps must increase in frame order. Without frames.csv a
+// drive has no clock of its own and the commands stamp frame f with f / --frame-rate.
 // Frames are the names present in every camera folder, in natural order ("2" before "10").
 // Frames missing in some camera are reported (incomplete_frames()), never silently dropped.
 // Images are loaded lazily, as 8-bit grey, and their size is checked against rig.json.
@@ -52,6 +58,10 @@ class Drive {
   // three equal channels). Throws InputError as LoadGray.
   cv::Mat LoadRgb(size_t frame, size_t camera) const;
 
+  // The frame's timestamp (seconds) from frames.csv; false when the drive has none.
+  bool HasTimestamps() const { return !timestamps_.empty(); }
+  double FrameTimestamp(size_t frame) const { return timestamps_.at(frame); }
+
   std::filesystem::path GroundTruthPosesPath() const { return folder_ / "gt" / "poses.tum"; }
   std::filesystem::path GroundTruthMeshPath() const { return folder_ / "gt" / "mesh.ply"; }
 
@@ -62,7 +72,14 @@ class Drive {
   // image_files_[camera][frame]: file name inside images/<camera>/.
   std::vector<std::vector<std::string>> image_files_;
   std::vector<IncompleteFrame> incomplete_frames_;
+  std::vector<double> timestamps_;  // per frame, from frames.csv; empty without it
 };
+
+// The per-frame timestamps of `frame_names` in a frames.csv file (format above). Throws
+// InputError naming the file and line: a missing column, a bad number, a frame without a row,
+// timestamps that do not increase.
+std::vector<double> ReadFrameTimestamps(const std::filesystem::path& frames_csv,
+                                        const std::vector<std::string>& frame_names);
 
 // "2" < "10" < "a2" < "a10": digit runs compare by value.
 bool NaturalLess(const std::string& a, const std::string& b);

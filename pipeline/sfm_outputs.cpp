@@ -28,7 +28,11 @@ SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
   std::filesystem::create_directories(folder / "stats");
   std::vector<StampedPose> poses;
   for (const FinalizedKeyframe& keyframe : run.keyframes) {
-    poses.push_back({keyframe.frame / options.frame_rate, keyframe.world_from_rig});
+    // The drive's own clock (frames.csv) when it has one.
+    const double timestamp = drive.HasTimestamps()
+                                 ? drive.FrameTimestamp(static_cast<size_t>(keyframe.frame))
+                                 : keyframe.frame / options.frame_rate;
+    poses.push_back({timestamp, keyframe.world_from_rig});
     for (const FinalizedPoint& point : keyframe.points)
       outputs.cloud.points.push_back(point.position);
   }

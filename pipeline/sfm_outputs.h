@@ -15,7 +15,7 @@
 namespace omni {
 
 struct SfmOutputOptions {
-  // Timestamps of poses.tum: frame index / frame_rate.
+  // Timestamps of poses.tum when the drive has no frames.csv: frame index / frame_rate.
   double frame_rate = 15.0;
   // Seconds the SfM waited for room in the surface queue (reconstruct), a stage of its own.
   double queue_wait_seconds = 0.0;

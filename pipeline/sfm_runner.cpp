@@ -102,8 +102,17 @@ struct SfmRunner::Impl {
     if (options.loop_closure) closer = std::make_unique<LoopCloser>(rig, options.loop);
   }
 
+  // The tracker counts the frames it was given; a skipped frame is not given, so its frame
+  // indices are mapped back to the input's.
+  int InputFrame(int tracker_frame) const {
+    return tracker_frame >= 0 && static_cast<size_t>(tracker_frame) < input_frames.size()
+               ? static_cast<int>(input_frames[tracker_frame])
+               : tracker_frame;
+  }
+
   void HandOver() {
     for (FinalizedKeyframe& keyframe : tracker.TakeFinalized()) {
+      keyframe.frame = InputFrame(keyframe.frame);
       if (callbacks.keyframe_finalised) callbacks.keyframe_finalised(keyframe);
       result.keyframes.push_back(std::move(keyframe));
     }
@@ -116,6 +125,7 @@ struct SfmRunner::Impl {
   Tracker tracker;
   std::unique_ptr<LoopCloser> closer;
   SfmRunResult result;
+  std::vector<size_t> input_frames;  // input frame of each frame given to the tracker
   Clock::time_point start = Clock::now();
 };
 
@@ -155,6 +165,7 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
     row.matched = tracked.num_matched;
     row.predicted = tracked.num_predicted;
     row.relocalising = tracked.relocalising;
+    s.input_frames.push_back(row.frame);
     row.result = s.tracker.AddFrame(tracked.observations, s.builder.MapPointSearcher());
     s.builder.SetFrameResult(row.result.tracked, row.result.keyframe);
     if (row.result.tracked) {
@@ -171,6 +182,8 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
       const bool closed = s.closer->AddKeyframe(frame.images, tracked, &s.tracker, &event);
       result.loop_closure_seconds += SecondsSince(loop_start);
       if (closed) {
+        event.frame = s.InputFrame(event.frame);
+        event.candidate_frame = s.InputFrame(event.candidate_frame);
         spdlog::info("sfm: {}", event.Summary());
         SfmLoopClosure closure;
         closure.event = event;
@@ -181,6 +194,8 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
               poses_after[k].rotation.angularDistance(poses_before[k].rotation) * 180.0 / M_PI;
         result.loop_closures.push_back(closure);
         result.keyframes = s.tracker.FinalizedSnapshot();
+        for (FinalizedKeyframe& keyframe : result.keyframes)
+          keyframe.frame = s.InputFrame(keyframe.frame);
         if (s.callbacks.map_corrected) s.callbacks.map_corrected(result.keyframes);
       }
     }

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -37,10 +38,17 @@ fs::path ScratchDir(const std::string& name) {
   return dir;
 }
 
+// How a drive is cut from the short drive.
+struct Cut {
+  std::vector<int> black;       // frames whose images are black
+  std::vector<int> unreadable;  // frames whose image of one camera is not an image
+  double clock_start = -1.0;    // >= 0: a frames.csv with frame i at clock_start + i * 0.2 s
+};
+
 // A drive of the short drive's frames `keep` (in order), renumbered 0.., its ground truth
-// restamped to match (frame / 15 s); the frames in `black` get black images.
-fs::path CutShortDrive(const fs::path& scratch, const std::vector<int>& keep,
-                       const std::vector<int>& black = {}) {
+// restamped to match (frame / 15 s, or the frames.csv clock).
+fs::path CutShortDrive(const fs::path& scratch, const std::vector<int>& keep, const Cut& cut = {}) {
+  const std::vector<int>& black = cut.black;
   const fs::path source(OMNI_SHORT_DRIVE_DIR);
   const fs::path drive = scratch / "drive";
   fs::create_directories(drive / "gt");
@@ -48,8 +56,10 @@ fs::path CutShortDrive(const fs::path& scratch, const std::vector<int>& keep,
   const std::vector<StampedPose> truth = ReadTum(source / "gt" / "poses.tum");
   std::vector<StampedPose> kept;
   for (size_t i = 0; i < keep.size(); ++i)
-    kept.push_back({static_cast<double>(i) / 15.0, truth.at(keep[i]).world_from_rig});
+    kept.push_back({cut.clock_start >= 0.0 ? cut.clock_start + 0.2 * i : i / 15.0,
+                    truth.at(keep[i]).world_from_rig});
   WriteTum(kept, drive / "gt" / "poses.tum");
+  std::string frames_csv = "frame,camera,timestamp_s\n";
   for (const auto& camera : fs::directory_iterator(source / "images")) {
     std::vector<fs::path> images;
     for (const auto& image : fs::directory_iterator(camera.path())) images.push_back(image.path());
@@ -61,14 +71,23 @@ fs::path CutShortDrive(const fs::path& scratch, const std::vector<int>& keep,
       std::snprintf(name, sizeof(name), "%06zu", i);
       const fs::path image = images.at(keep[i]);
       const fs::path copy = target / (name + image.extension().string());
+      char stamp[64];
+      std::snprintf(stamp, sizeof(stamp), "%.6f", cut.clock_start + 0.2 * i);
+      frames_csv +=
+          std::string(name) + "," + camera.path().filename().string() + "," + stamp + "\n";
+      const bool unreadable = camera.path().filename() == "cam2" &&
+                              std::count(cut.unreadable.begin(), cut.unreadable.end(), keep[i]);
       if (std::find(black.begin(), black.end(), keep[i]) != black.end()) {
         const cv::Mat original = cv::imread(image.string(), cv::IMREAD_UNCHANGED);
         cv::imwrite(copy.string(), cv::Mat::zeros(original.size(), original.type()));
+      } else if (unreadable) {
+        std::ofstream(copy, std::ios::binary) << "not an image";
       } else {
         fs::create_symlink(image, copy);
       }
     }
   }
+  if (cut.clock_start >= 0.0) std::ofstream(drive / "frames.csv") << frames_csv;
   return drive;
 }
 
@@ -147,7 +166,9 @@ void ExpectSameTracking(const fs::path& scratch, const fs::path& drive, size_t f
 
 TEST(SfmReconstructParityShortDrive, ABlackFrameIsLostThenTrackingResumesInBoth) {
   const fs::path scratch = ScratchDir("black");
-  const fs::path drive = CutShortDrive(scratch, Range(0, 45), {20});
+  Cut cut;
+  cut.black = {20};
+  const fs::path drive = CutShortDrive(scratch, Range(0, 45), cut);
   FramesCsv csv;
   ExpectSameTracking(scratch, drive, 45, &csv);
   if (HasFatalFailure()) return;
@@ -177,11 +198,37 @@ TEST(SfmReconstructParityShortDrive, AJumpIsFollowedTheSameWayByBoth) {
   }
 }
 
+// An image that cannot be read: its frame is skipped by both commands (a row with loaded 0),
+// and the keyframes after it keep their own frames: poses.tum carries the drive's clock
+// (frames.csv), which the ground truth is stamped with too, so a pose given the wrong frame
+// would not register.
+TEST(SfmReconstructParityShortDrive, AnUnreadableFrameIsSkippedAndThePosesKeepTheDrivesClock) {
+  const fs::path scratch = ScratchDir("unreadable");
+  Cut cut;
+  cut.unreadable = {20};
+  cut.clock_start = 5000.0;
+  const fs::path drive = CutShortDrive(scratch, Range(0, 45), cut);
+  FramesCsv csv;
+  ExpectSameTracking(scratch, drive, 45, &csv);
+  if (HasFatalFailure()) return;
+  EXPECT_EQ(csv.Column("loaded").at(20), 0);
+  const std::vector<StampedPose> poses = ReadTum(scratch / "rec" / "poses.tum");
+  ASSERT_GT(poses.size(), 3u);
+  EXPECT_GT(poses.back().timestamp, 5000.0 + 0.2 * 21 - 1e-6);
+  for (const StampedPose& pose : poses) {
+    const double step = (pose.timestamp - 5000.0) / 0.2;
+    EXPECT_NEAR(step, std::round(step), 1e-4) << pose.timestamp;
+    EXPECT_NE(std::lround(step), 20) << "the skipped frame has no pose";
+  }
+}
+
 // Two frames of nothing but black: no corners, no map. Both commands say so on stderr in one
 // line and exit with the not-usable code; reconstruct publishes what happened.
 TEST(SfmReconstructParityShortDrive, NoMapIsNotUsableInBoth) {
   const fs::path scratch = ScratchDir("no_map");
-  const fs::path drive = CutShortDrive(scratch, Range(0, 6), Range(0, 6));
+  Cut cut;
+  cut.black = Range(0, 6);
+  const fs::path drive = CutShortDrive(scratch, Range(0, 6), cut);
   const testing::CommandResult sfm = RunOmnisculpt(
       {"--quiet", "sfm", drive.string(), "--out", (scratch / "sfm").string()}, scratch);
   EXPECT_EQ(sfm.exit_code, kExitNotUsable) << sfm.err;

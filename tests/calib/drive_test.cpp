@@ -230,5 +230,38 @@ TEST(Drive, ColourAndSixteenBitImagesLoadAsEightBitGrey) {
   EXPECT_NEAR(deep.at<uint8_t>(3, 4), 100, 1);
 }
 
+// frames.csv: a frame's timestamp is the mean of its cameras' rows; a drive without it has
+// none; a bad number, a frame without a row or timestamps that do not increase are bad input
+// naming the file (and the line when there is one).
+TEST(DriveTest, FrameTimestampsFromFramesCsv) {
+  TempDir dir;
+  const std::filesystem::path drive = MakeDrive(dir, {"0.png", "1.png"}, {"0.png", "1.png"});
+  EXPECT_FALSE(Drive::Open(drive).HasTimestamps());
+  WriteBytes(drive / "frames.csv",
+             "frame,camera,timestamp_s,source\n0,left,100.5,a.png\n0,right,100.7,b.png\n"
+             "1,left,1646304541.927203655,c.png\n1,right,1646304541.927203655,d.png\n");
+  const Drive opened = Drive::Open(drive);
+  ASSERT_TRUE(opened.HasTimestamps());
+  EXPECT_NEAR(opened.FrameTimestamp(0), 100.6, 1e-9);
+  EXPECT_NEAR(opened.FrameTimestamp(1), 1646304541.927203655, 1e-6);
+
+  auto refused = [&](const std::string& csv, const std::string& expected) {
+    WriteBytes(drive / "frames.csv", csv);
+    try {
+      Drive::Open(drive);
+      ADD_FAILURE() << "accepted: " << csv;
+    } catch (const InputError& error) {
+      const std::string what = error.what();
+      EXPECT_NE(what.find("frames.csv"), std::string::npos) << what;
+      EXPECT_NE(what.find(expected), std::string::npos) << what;
+    }
+  };
+  refused("frame,camera,timestamp_s\n0,left,1\n0,right,0x10\n1,left,2\n", "line 3");
+  refused("frame,camera,timestamp_s\n0,left,1\n1,left,nan\n", "line 3");
+  refused("frame,camera,timestamp_s\n0,left,1\n", "no row for frame \"1\"");
+  refused("frame,camera,timestamp_s\n0,left,2\n1,left,1\n", "must increase");
+  refused("frame,camera\n0,left\n", "timestamp_s");
+}
+
 }  // namespace
 }  // namespace omni

@@ -1,6 +1,6 @@
-// `omnisculpt reconstruct DRIVE --out OUT` (issue 9): the whole job in one process, SfM and
+// `omnisculpt reconstruct DRIVE --out OUT`: the whole job in one process, SfM and
 // surface on their own threads joined by a bounded queue (apps/pipeline/), writing the outputs
-// of DESIGN.md §4.
+// of docs/design.md ("Data").
 //
 // Resume-safe output: everything is written into the sibling folder OUT.incomplete/, marked by
 // the file INCOMPLETE, and renamed to OUT only when complete (the last file written is
@@ -132,8 +132,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
   const Rig& rig = drive.rig();
   o.pipeline.tracker.central = o.central ? true : o.non_central ? false : rig.central;
   o.pipeline.progress_period = isatty(fileno(stderr)) ? 2.0 : 10.0;
-  if (const std::string problem = o.pipeline.Check(); !problem.empty())
-    throw InputError("", "options", problem);
+  ThrowIfInvalid(o.pipeline.Check(), "PipelineOptions");
   const fs::path out = fs::absolute(fs::path(o.out)).lexically_normal();
   const fs::path partial = PrepareOutput(out.has_filename() ? out : out.parent_path(), o.force);
   spdlog::info("reconstruct: {} frames of {}, {} cameras, {} mode; writing {}", drive.NumFrames(),

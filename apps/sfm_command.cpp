@@ -1,4 +1,4 @@
-// `omnisculpt sfm DRIVE --out OUT [--central|--non-central]` (issue 8): the incremental rig SfM
+// `omnisculpt sfm DRIVE --out OUT [--central|--non-central]`: the incremental rig SfM
 // of sfm/ on a drive's images, writing the keyframe poses (poses.tum), the points (points.ply)
 // a COLMAP text model (sparse/), per-frame statistics (stats/sfm_frames.csv), the time per
 // stage (stats/sfm_stages.csv) and a summary (stats/sfm_summary.csv). ZNCC tracks per camera
@@ -67,8 +67,9 @@ void RunSfm(SfmCommandOptions& o, const GlobalOptions& global) {
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
   o.tracker.central = o.central ? true : o.non_central ? false : rig.central;
-  for (const std::string& problem : {o.prefetch.Check(), o.tracks.Check(), o.tracker.Check()})
-    if (!problem.empty()) throw InputError("", "options", problem);
+  ThrowIfInvalid(o.prefetch.Check(), "FramePrefetcherOptions");
+  ThrowIfInvalid(o.tracks.Check(), "TrackBuilderOptions");
+  ThrowIfInvalid(o.tracker.Check(), "TrackerOptions");
   spdlog::info("sfm: {} frames, {} cameras, {} mode (largest camera offset {:.3f} m)",
                drive.NumFrames(), rig.NumCameras(), o.tracker.central ? "central" : "non-central",
                rig.MaxCenterOffset());

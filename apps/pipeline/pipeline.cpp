@@ -87,7 +87,7 @@ struct QueuedKeyframe {
 
 PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
                            const PipelineCallbacks& callbacks) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "PipelineOptions");
   const Rig& rig = drive.rig();
   PipelineResult result;
   result.frames_total = options.max_frames > 0

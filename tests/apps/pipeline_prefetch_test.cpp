@@ -1,5 +1,5 @@
-// The frame prefetcher of `omnisculpt reconstruct` and `omnisculpt sfm` (issue 9,
-// apps/pipeline/frame_prefetcher.h): frames in order, a frame's reading error delivered with it,
+// The frame prefetcher of `omnisculpt reconstruct` and `omnisculpt sfm`
+// (apps/pipeline/frame_prefetcher.h): frames in order, a frame's reading error delivered with it,
 // never more than frames_ahead frames decoded ahead of the consumer, a clean early stop.
 
 #include <gtest/gtest.h>
@@ -11,6 +11,7 @@
 
 #include "apps/pipeline/frame_prefetcher.h"
 #include "calib/error.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -37,6 +38,12 @@ TEST(PipelineFramePrefetcher, OptionsAreChecked) {
   FramePrefetcherOptions options;
   options.frames_ahead = 0;
   EXPECT_FALSE(options.Check().empty());
+  EXPECT_TRUE(testing::ThrowsOptionsError(
+      [&] {
+        FramePrefetcher prefetcher(
+            3, [](size_t frame) { return FakeImages(frame, 1); }, options);
+      },
+      "FramePrefetcherOptions.frames_ahead: expected"));
 }
 
 TEST(PipelineFramePrefetcher, DeliversEveryFrameInOrderWithItsImages) {

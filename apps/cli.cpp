@@ -66,6 +66,9 @@ int RunCommandLine(int argc, char** argv) {
     }
     std::fprintf(stderr, "omnisculpt: error: %s (see --help)\n", message.c_str());
     return 2;
+  } catch (const OptionsError& error) {
+    std::fprintf(stderr, "omnisculpt: error: invalid options: %s\n", error.what());
+    return 2;
   } catch (const InputError& error) {
     std::fprintf(stderr, "omnisculpt: error: %s\n", error.what());
     return 2;

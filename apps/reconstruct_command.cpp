@@ -279,8 +279,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
   ApplySfmOptions(rig, "reconstruct", &o.sfm);
   o.pipeline.sfm = o.sfm.sfm;
   o.pipeline.progress_period = isatty(fileno(stderr)) ? 2.0 : 10.0;
-  if (const std::string problem = o.pipeline.Check(); !problem.empty())
-    throw InputError("", "options", problem);
+  ThrowIfInvalid(o.pipeline.Check(), "PipelineOptions");
   const fs::path out = fs::absolute(fs::path(o.out)).lexically_normal();
   const fs::path partial = PrepareOutput(out.has_filename() ? out : out.parent_path(), o.force);
   try {

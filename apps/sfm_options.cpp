@@ -36,7 +36,9 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "Typical scene depth (m), for the warning on large camera offsets in central "
                    "mode")
       ->capture_default_str();
-  command->add_option("--frame-rate", o->frame_rate, "Timestamps of poses.tum: frame / rate (when the drive has no frames.csv)")
+  command
+      ->add_option("--frame-rate", o->frame_rate,
+                   "Timestamps of poses.tum: frame / rate (when the drive has no frames.csv)")
       ->capture_default_str();
 }
 
@@ -48,8 +50,7 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
   if (o->sfm.max_frames < 0) throw InputError("", "--max-frames", "expected 0 or a positive count");
   if (!(o->scene_depth > 0.0)) throw InputError("", "--scene-depth", "expected a positive depth");
   o->sfm.tracker.central = o->central ? true : o->non_central ? false : rig.central;
-  if (const std::string problem = o->sfm.Check(); !problem.empty())
-    throw InputError("", "options", problem);
+  ThrowIfInvalid(o->sfm.Check(), "SfmRunnerOptions");
   const double offset_ratio = rig.MaxCenterOffset() / o->scene_depth;
   if (o->sfm.tracker.central && offset_ratio > o->max_central_offset_ratio)
     spdlog::warn(

@@ -1,4 +1,4 @@
-// `omnisculpt surface` (issue 6): the incremental sculptor of surface/ fed by a simulated
+// `omnisculpt surface`: the incremental sculptor of surface/ fed by a simulated
 // perfect SfM on a drive's ground truth (--from-gt), writing surface.ply and
 // stats/keyframes.csv.
 
@@ -54,9 +54,8 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   if (o.no_genus_refinement) o.sculptor.genus.enabled = false;
   if (o.no_smoothing) o.sculptor.smoothing.enabled = false;
   if (o.snapshot_every < 0) throw InputError("", "--snapshot-every", "must be >= 0");
-  for (const std::string& problem : {o.sculptor.Check(), o.gt.Check()}) {
-    if (!problem.empty()) throw InputError("", "options", problem);
-  }
+  ThrowIfInvalid(o.sculptor.Check(), "SculptorOptions");
+  ThrowIfInvalid(o.gt.Check(), "GtKeyframeOptions");
   const auto start = std::chrono::steady_clock::now();
   std::vector<StampedPose> keyframe_poses;  // known for --from-gt only
   const std::vector<SurfaceKeyframe> stream =
@@ -103,8 +102,8 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   csv << KeyframeStatsCsvHeader() << "\n";
   for (const KeyframeStats& st : stats) csv << KeyframeStatsCsvRow(st) << "\n";
   WriteTextFileAtomically(out / "stats" / "keyframes.csv", csv.str());
-  // The input side of the reconstruction folder (DESIGN.md §4), so that `omnisculpt eval` reads
-  // it like the pipeline's: the points fed to the sculptor and, from --from-gt, the keyframe
+  // The input side of the reconstruction folder (docs/design.md, "Data"), so that `omnisculpt eval`
+  // reads it like the pipeline's: the points fed to the sculptor and, from --from-gt, the keyframe
   // poses of the simulated SfM.
   PointCloud points;
   for (const SurfaceKeyframe& kf : stream) {

@@ -20,4 +20,9 @@ InputError::InputError(const std::filesystem::path& file, const std::string& fie
 
 InputError::InputError(const std::string& problem) : std::runtime_error(problem) {}
 
+void ThrowIfInvalid(const std::string& problem, const char* options_name) {
+  if (problem.empty()) return;
+  throw OptionsError(std::string(options_name) + "." + problem);
+}
+
 }  // namespace omni

@@ -5,6 +5,8 @@
 #include <chrono>
 #include <utility>
 
+#include "calib/error.h"
+
 namespace omni {
 
 std::string FramePrefetcherOptions::Check() const {
@@ -17,7 +19,7 @@ FramePrefetcher::FramePrefetcher(size_t num_frames, Loader loader,
     : num_frames_(num_frames),
       frames_ahead_(static_cast<size_t>(std::max(options.frames_ahead, 1))),
       loader_(std::move(loader)) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "FramePrefetcherOptions");
   thread_ = std::thread([this] { Run(); });
 }
 

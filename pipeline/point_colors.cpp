@@ -39,7 +39,7 @@ Eigen::Vector3d SampleRgbBilinear(const cv::Mat& rgb, const Eigen::Vector2d& pix
 std::vector<Rgb8> ColorPoints(const Rig& rig, const std::vector<FinalizedKeyframe>& keyframes,
                               const RgbImageLoader& load_rgb, const PointColorOptions& options,
                               PointColorStats* stats) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "PointColorOptions");
   const auto start = std::chrono::steady_clock::now();
   const int num_cameras = static_cast<int>(rig.NumCameras());
   std::unordered_map<int, int> frame_of;  // tracker keyframe index -> drive frame

@@ -68,8 +68,7 @@ struct QueuedKeyframe {
 
 PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
                            const PipelineCallbacks& callbacks) {
-  if (const std::string problem = options.Check(); !problem.empty())
-    throw std::invalid_argument("PipelineOptions." + problem);
+  ThrowIfInvalid(options.Check(), "PipelineOptions");
   PipelineResult result;
   const SfmFrameSource source = DriveFrameSource(drive);
   const size_t frames_total = options.sfm.max_frames > 0

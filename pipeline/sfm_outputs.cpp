@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "calib/atomic_file.h"
+#include "calib/error.h"
 #include "calib/tum.h"
 #include "sfm/colmap_model.h"
 
@@ -21,8 +22,7 @@ std::string SfmOutputOptions::Check() const {
 
 SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
                            const std::filesystem::path& folder, const SfmOutputOptions& options) {
-  if (const std::string problem = options.Check(); !problem.empty())
-    throw std::invalid_argument("SfmOutputOptions." + problem);
+  ThrowIfInvalid(options.Check(), "SfmOutputOptions");
   const Rig& rig = drive.rig();
   SfmOutputs outputs;
   std::filesystem::create_directories(folder / "stats");

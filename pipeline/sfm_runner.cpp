@@ -131,8 +131,7 @@ struct SfmRunner::Impl {
 
 SfmRunner::SfmRunner(const Rig& rig, const SfmRunnerOptions& options,
                      const SfmRunnerCallbacks& callbacks) {
-  if (const std::string problem = options.Check(); !problem.empty())
-    throw std::invalid_argument("SfmRunnerOptions." + problem);
+  ThrowIfInvalid(options.Check(), "SfmRunnerOptions");
   impl_ = std::make_unique<Impl>(rig, options, callbacks);
 }
 

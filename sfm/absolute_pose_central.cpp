@@ -4,6 +4,7 @@
 #include <opengv/absolute_pose/CentralAbsoluteAdapter.hpp>
 #include <opengv/sac_problems/absolute_pose/AbsolutePoseSacProblem.hpp>
 
+#include "calib/error.h"
 #include "sfm/opengv_ransac.h"
 
 namespace omni {
@@ -13,7 +14,7 @@ RansacResult EstimateCentralAbsolutePose(const std::vector<Eigen::Vector3d>& bea
                                          const CentralAbsolutePoseOptions& options,
                                          Rigid3d* world_from_cam) {
   assert(bearings.size() == points_in_world.size());
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "CentralAbsolutePoseOptions");
   using Problem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
   const opengv::bearingVectors_t f = internal::ToOpengvVectors(bearings);
   const opengv::points_t points(points_in_world.begin(), points_in_world.end());

@@ -14,7 +14,10 @@ namespace omni {
 struct CentralAbsolutePoseOptions {
   RansacOptions ransac;
 
-  std::string Check() const { return ransac.Check(); }
+  std::string Check() const {
+    const std::string problem = ransac.Check();
+    return problem.empty() ? problem : "ransac." + problem;
+  }
 };
 
 // bearings[i] (unit, camera frame) observes points_in_world[i]. On success world_from_cam is

@@ -4,6 +4,7 @@
 #include <opengv/absolute_pose/NoncentralAbsoluteAdapter.hpp>
 #include <opengv/sac_problems/absolute_pose/AbsolutePoseSacProblem.hpp>
 
+#include "calib/error.h"
 #include "sfm/opengv_ransac.h"
 #include "sfm/opengv_rig.h"
 
@@ -16,7 +17,7 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
                                             const NoncentralAbsolutePoseOptions& options,
                                             Rigid3d* world_from_rig) {
   assert(bearings.size() == points_in_world.size() && cameras.size() == bearings.size());
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "NoncentralAbsolutePoseOptions");
   using Problem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
   const opengv::bearingVectors_t f = internal::ToOpengvVectors(bearings);
   const opengv::points_t points(points_in_world.begin(), points_in_world.end());

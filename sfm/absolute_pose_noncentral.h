@@ -16,7 +16,10 @@ namespace omni {
 struct NoncentralAbsolutePoseOptions {
   RansacOptions ransac;
 
-  std::string Check() const { return ransac.Check(); }
+  std::string Check() const {
+    const std::string problem = ransac.Check();
+    return problem.empty() ? problem : "ransac." + problem;
+  }
 };
 
 // bearings[i] (unit, frame of camera cameras[i]) observes points_in_world[i]. On success

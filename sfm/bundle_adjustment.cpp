@@ -8,6 +8,8 @@
 #include <memory>
 #include <sstream>
 
+#include "calib/error.h"
+
 namespace omni {
 namespace {
 
@@ -236,7 +238,7 @@ double ObservationAngle(const Rig& rig, const BundleAdjustmentOptions::Mode mode
 
 BundleAdjustmentSummary LocalBundleAdjust(const Rig& rig, const BundleAdjustmentOptions& options,
                                           BundleAdjustmentProblem* problem) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "BundleAdjustmentOptions");
   assert(!rig.cameras.empty());
   assert(problem->point_fixed.empty() ||
          problem->point_fixed.size() == problem->points_in_world.size());

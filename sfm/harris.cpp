@@ -2,11 +2,13 @@
 
 #include <Eigen/Core>
 #include <algorithm>
-#include <cassert>
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "calib/error.h"
 
 namespace omni {
 
@@ -30,8 +32,8 @@ std::string HarrisOptions::Check() const {
 }
 
 cv::Mat PrepareImage(const cv::Mat& input, const HarrisOptions& options) {
-  assert(options.Check().empty());
-  assert(!input.empty());
+  ThrowIfInvalid(options.Check(), "HarrisOptions");
+  if (input.empty()) throw std::invalid_argument("PrepareImage: empty image");
   cv::Mat grey;
   if (input.channels() == 3)
     cv::cvtColor(input, grey, cv::COLOR_BGR2GRAY);
@@ -44,7 +46,9 @@ cv::Mat PrepareImage(const cv::Mat& input, const HarrisOptions& options) {
     grey.convertTo(converted, CV_8U, 1.0 / 257.0);
     grey = converted;
   }
-  assert(grey.type() == CV_8UC1);
+  if (grey.type() != CV_8UC1) {
+    throw std::invalid_argument("PrepareImage: expected 8 or 16 bits and 1, 3 or 4 channels");
+  }
   if (options.downscale == 1.0) return grey.clone();
   cv::Mat shrunk;
   const cv::Size size(static_cast<int>(std::lround(grey.cols / options.downscale)),
@@ -256,8 +260,10 @@ void RefineCornersSubpixel(const cv::Mat& image, const HarrisOptions& options,
 }  // namespace
 
 std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOptions& options) {
-  assert(options.Check().empty());
-  assert(prepared.type() == CV_8UC1);
+  ThrowIfInvalid(options.Check(), "HarrisOptions");
+  if (prepared.type() != CV_8UC1) {
+    throw std::invalid_argument("DetectHarrisCorners: expected an 8-bit grey image (PrepareImage)");
+  }
   std::vector<Corner> corners;
   if (prepared.cols <= 2 * options.border || prepared.rows <= 2 * options.border) return corners;
 

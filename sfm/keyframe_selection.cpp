@@ -1,7 +1,8 @@
 #include "sfm/keyframe_selection.h"
 
-#include <cassert>
 #include <limits>
+
+#include "calib/error.h"
 
 namespace omni {
 
@@ -17,7 +18,7 @@ std::string KeyframeSelectionOptions::Check() const {
 
 KeyframeDecisionReason DecideKeyframe(const KeyframeCandidate& candidate,
                                       const KeyframeSelectionOptions& options) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "KeyframeSelectionOptions");
   KeyframeDecisionReason result;
   const double baseline =
       (candidate.world_from_rig.translation - candidate.last_keyframe_world_from_rig.translation)

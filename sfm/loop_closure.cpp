@@ -15,6 +15,7 @@
 #include <sstream>
 #include <unordered_map>
 
+#include "calib/error.h"
 #include "sfm/harris.h"
 #include "sfm/zncc_matching.h"
 
@@ -30,7 +31,7 @@ std::string LoopDetectionOptions::Check() const {
 
 LoopDetector::LoopDetector(const Rig& rig, const LoopDetectionOptions& options)
     : options_(options) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "LoopDetectionOptions");
   const size_t n = rig.cameras.size();
   std::vector<Eigen::Vector3d> axes;
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
@@ -232,9 +233,9 @@ std::string LoopClosureTimings::Summary() const {
 }
 
 LoopCloser::LoopCloser(const Rig& rig, const LoopClosureOptions& options)
-    : rig_(rig), options_(options), detector_(rig, options.detection) {
-  assert(options.Check().empty());
-}
+    : rig_(rig),
+      options_(CheckedOptions(options, "LoopClosureOptions")),
+      detector_(rig, options.detection) {}
 
 LoopCloser::~LoopCloser() {
   if (timings_.keyframes > 0) spdlog::debug("loop closure: {}", timings_.Summary());
@@ -305,7 +306,7 @@ LoopVerification VerifyLoop(const Rig& rig, const std::vector<int>& ring, int sh
                             const LoopMatches& matches,
                             const std::vector<Rigid3d>& world_from_keyframe, int then, int now,
                             const LoopClosureOptions& options, unsigned seed) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "LoopClosureOptions");
   assert(matches.bearings_now.size() == matches.bearings_then.size());
   assert(matches.points_now.size() == matches.points_then.size());
   LoopVerification v;

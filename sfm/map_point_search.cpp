@@ -7,6 +7,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#include "calib/error.h"
 #include "sfm/harris.h"
 #include "sfm/zncc_matching.h"
 
@@ -26,8 +27,9 @@ std::string MapPointSearchOptions::Check() const {
 MapPointSearch::MapPointSearch(const Rig& rig, const MapPointSearchOptions& options,
                                double downscale)
     : rig_(rig), options_(options), downscale_(downscale) {
-  assert(options.Check().empty());
-  assert(downscale > 0.0);
+  ThrowIfInvalid(options.Check(), "MapPointSearchOptions");
+  if (!(downscale > 0.0))
+    throw OptionsError("MapPointSearch.downscale: expected a positive factor");
 }
 
 namespace {

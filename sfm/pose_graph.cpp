@@ -7,6 +7,8 @@
 #include <cmath>
 #include <sstream>
 
+#include "calib/error.h"
+
 namespace omni {
 
 std::string PoseGraphOptions::Check() const {
@@ -80,7 +82,7 @@ struct Sim3EdgeCost {
 PoseGraphSummary OptimizePoseGraph(const std::vector<PoseGraphEdge>& edges,
                                    const std::vector<int>& fixed, const PoseGraphOptions& options,
                                    std::vector<Sim3d>* world_from_node) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "PoseGraphOptions");
   assert(!fixed.empty());
   const size_t n = world_from_node->size();
   std::vector<Eigen::Quaterniond> q(n);

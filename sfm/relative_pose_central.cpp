@@ -4,6 +4,7 @@
 #include <opengv/relative_pose/CentralRelativeAdapter.hpp>
 #include <opengv/sac_problems/relative_pose/CentralRelativePoseSacProblem.hpp>
 
+#include "calib/error.h"
 #include "sfm/opengv_ransac.h"
 
 namespace omni {
@@ -13,7 +14,7 @@ RansacResult EstimateCentralRelativePose(const std::vector<Eigen::Vector3d>& bea
                                          const CentralRelativePoseOptions& options,
                                          Rigid3d* cam1_from_cam2) {
   assert(bearings1.size() == bearings2.size());
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "CentralRelativePoseOptions");
   using Problem = opengv::sac_problems::relative_pose::CentralRelativePoseSacProblem;
   const opengv::bearingVectors_t f1 = internal::ToOpengvVectors(bearings1);
   const opengv::bearingVectors_t f2 = internal::ToOpengvVectors(bearings2);

@@ -16,7 +16,10 @@ struct CentralRelativePoseOptions {
   Solver solver = Solver::kStewenius;
   RansacOptions ransac;
 
-  std::string Check() const { return ransac.Check(); }
+  std::string Check() const {
+    const std::string problem = ransac.Check();
+    return problem.empty() ? problem : "ransac." + problem;
+  }
 };
 
 // bearings1[i] (unit, view 1's frame) and bearings2[i] (view 2's frame) see the same point.

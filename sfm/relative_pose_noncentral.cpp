@@ -4,6 +4,7 @@
 #include <opengv/relative_pose/NoncentralRelativeAdapter.hpp>
 #include <opengv/sac_problems/relative_pose/NoncentralRelativePoseSacProblem.hpp>
 
+#include "calib/error.h"
 #include "sfm/opengv_ransac.h"
 #include "sfm/opengv_rig.h"
 
@@ -15,7 +16,7 @@ RansacResult EstimateNoncentralRelativePose(
     const NoncentralRelativePoseOptions& options, Rigid3d* rig1_from_rig2) {
   assert(bearings1.size() == bearings2.size() && cameras1.size() == bearings1.size() &&
          cameras2.size() == bearings2.size());
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "NoncentralRelativePoseOptions");
   using Problem = opengv::sac_problems::relative_pose::NoncentralRelativePoseSacProblem;
   const opengv::bearingVectors_t f1 = internal::ToOpengvVectors(bearings1);
   const opengv::bearingVectors_t f2 = internal::ToOpengvVectors(bearings2);

@@ -19,7 +19,10 @@ struct NoncentralRelativePoseOptions {
   Solver solver = Solver::kSeventeenPoint;
   RansacOptions ransac;
 
-  std::string Check() const { return ransac.Check(); }
+  std::string Check() const {
+    const std::string problem = ransac.Check();
+    return problem.empty() ? problem : "ransac." + problem;
+  }
 };
 
 // Correspondence i: bearings1[i] in camera cameras1[i] of view 1 and bearings2[i] in camera

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <random>
 
+#include "calib/error.h"
+
 namespace omni {
 namespace {
 
@@ -82,7 +84,7 @@ Rig MakeSyntheticRingRig(int num_side_cameras, bool up_camera, double radius) {
 
 SyntheticScene MakeSyntheticScene(const Rig& rig, const std::vector<Rigid3d>& world_from_rig,
                                   const SyntheticSceneOptions& options) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "SyntheticSceneOptions");
   assert(!rig.cameras.empty() && !world_from_rig.empty());
   SyntheticScene scene;
   scene.rig = rig;

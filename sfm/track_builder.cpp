@@ -5,6 +5,9 @@
 #include <algorithm>
 #include <cassert>
 #include <chrono>
+#include <stdexcept>
+
+#include "calib/error.h"
 
 namespace omni {
 
@@ -36,15 +39,17 @@ PixelPredictor ReprojectionPredictor(const Tracker& tracker, const Rig& rig) {
 
 TrackBuilder::TrackBuilder(const Rig& rig, const TrackBuilderOptions& options)
     : rig_(rig),
-      options_(options),
+      options_(CheckedOptions(options, "TrackBuilderOptions")),
       cameras_(rig.NumCameras()),
-      map_search_(rig, options.map_search, options.harris.downscale) {
-  assert(options.Check().empty());
-}
+      map_search_(rig, options.map_search, options.harris.downscale) {}
 
 TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
                                     const PixelPredictor& predict) {
-  assert(images.size() == rig_.NumCameras());
+  if (images.size() != rig_.NumCameras()) {
+    throw std::invalid_argument("TrackBuilder::AddFrame: " + std::to_string(images.size()) +
+                                " images for a rig of " + std::to_string(rig_.NumCameras()) +
+                                " cameras");
+  }
   const int num_cameras = static_cast<int>(images.size());
   TrackedFrame frame;
   frame.relocalising = lost_ && !keyframe_cameras_.empty();

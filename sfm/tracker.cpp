@@ -4,9 +4,11 @@
 #include <cassert>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
 #include <unordered_map>
 #include <unordered_set>
 
+#include "calib/error.h"
 #include "sfm/absolute_pose_central.h"
 #include "sfm/absolute_pose_noncentral.h"
 #include "sfm/relative_pose_central.h"
@@ -652,8 +654,8 @@ void Tracker::Impl::FinalizeUpTo(int end) {
 }
 
 Tracker::Tracker(const Rig& rig, const TrackerOptions& options) : impl_(new Impl) {
-  assert(options.Check().empty());
-  assert(!rig.cameras.empty());
+  ThrowIfInvalid(options.Check(), "TrackerOptions");
+  if (rig.cameras.empty()) throw std::invalid_argument("Tracker: the rig has no camera");
   impl_->rig = rig;
   impl_->options = options;
   for (const Camera& camera : rig.cameras) impl_->central_center += camera.cam_from_rig.Center();
@@ -725,7 +727,7 @@ std::vector<int> Tracker::KeyframeFrames() const {
   return frames;
 }
 
-// ---- Map access and correction (loop closure, issue 9) ----
+// ---- Map access and correction (loop closure) ----
 
 std::vector<std::pair<int, Eigen::Vector3d>> Tracker::KeyframeTrackPoints(int keyframe) const {
   std::vector<std::pair<int, Eigen::Vector3d>> result;

@@ -1,8 +1,9 @@
 #include "sfm/triangulation.h"
 
 #include <Eigen/Dense>
-#include <cassert>
 #include <cmath>
+
+#include "calib/error.h"
 
 namespace omni {
 namespace {
@@ -43,7 +44,7 @@ const char* TriangulationStatusName(TriangulationStatus status) {
 TriangulationStatus TriangulatePoint(const std::vector<WorldRay>& rays,
                                      const TriangulationOptions& options,
                                      Eigen::Vector3d* point_in_world) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "TriangulationOptions");
   if (rays.size() < 2) return TriangulationStatus::kTooFewRays;
 
   // Midpoint: minimise sum_i |(I - d_i d_i^T)(X - c_i)|^2, i.e.

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 
+#include "calib/error.h"
+
 namespace omni {
 namespace {
 
@@ -219,7 +221,7 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
                                  const std::vector<SearchRegion>& regions, const cv::Mat& image2,
                                  const std::vector<Eigen::Vector2d>& corners2,
                                  const ZnccOptions& options) {
-  assert(options.Check().empty());
+  ThrowIfInvalid(options.Check(), "ZnccOptions");
   assert(regions.size() == corners1.size());
   assert(image1.type() == CV_8UC1 && image2.type() == CV_8UC1);
   MatchBuffers& buffers = ThreadBuffers();

@@ -17,6 +17,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "calib/error.h"
 #include "surface/internal/cgal_delaunay.h"
 #include "surface/internal/old_rays.h"
 #include "surface/internal/step6.h"
@@ -49,6 +50,7 @@ std::string SculptorOptions::Check() const {
   if (enclosing_star_rings < 1) return "enclosing_star_rings must be >= 1";
   if (grow_closure_rounds < 0) return "grow_closure_rounds must be >= 0";
   if (!(ray_grid_step_factor > 0.0)) return "ray_grid_step_factor must be > 0";
+  // The parts' Check() name their fields with the prefix already ("genus.max_group_cells").
   for (const std::string& problem : {genus.Check(), smoothing.Check()}) {
     if (!problem.empty()) return problem;
   }
@@ -1269,7 +1271,7 @@ struct IncrementalSculptor::Impl {
   }
 
   // ---- Step 6 (§4.6): genus refinement and smoothing, in surface/genus_refinement.cpp and
-  // surface/smoothing.cpp (STEP6, issue 7) ----
+  // surface/smoothing.cpp ----
   // `vertices`: the vertices whose δO umbrella may have changed (nullptr: those of `active`).
   void PostProcess(const std::vector<CellHandle>& active, std::vector<VertexHandle>* vertices,
                    const Eigen::Vector3d& centre, double radius, KeyframeStats& st) {
@@ -1315,10 +1317,7 @@ struct IncrementalSculptor::Impl {
 };
 
 IncrementalSculptor::IncrementalSculptor(const SculptorOptions& options)
-    : impl_(std::make_unique<Impl>(options)) {
-  const std::string problem = options.Check();
-  if (!problem.empty()) throw std::invalid_argument("SculptorOptions: " + problem);
-}
+    : impl_(std::make_unique<Impl>(CheckedOptions(options, "SculptorOptions"))) {}
 
 IncrementalSculptor::~IncrementalSculptor() = default;
 

@@ -99,7 +99,7 @@ class PointHash {
 class GtPointSampler {
  public:
   GtPointSampler(const TriangleMesh& mesh, const GtKeyframeOptions& options)
-      : options_(CheckedOptions(options)),
+      : options_(CheckedOptions(options, "GtKeyframeOptions")),
         caster_(mesh),
         rng_(options.seed),
         max_distance_(options.max_distance_factor * options.keyframe_spacing) {}
@@ -135,12 +135,6 @@ class GtPointSampler {
   }
 
  private:
-  static const GtKeyframeOptions& CheckedOptions(const GtKeyframeOptions& options) {
-    const std::string problem = options.Check();
-    if (!problem.empty()) throw std::invalid_argument("GtKeyframeOptions: " + problem);
-    return options;
-  }
-
   const GtKeyframeOptions& options_;
   const RayCaster caster_;
   std::mt19937_64 rng_;

@@ -78,6 +78,19 @@ TEST_F(CliTest, UnknownOptionIsOneErrorLineAndExitTwo) {
   }
 }
 
+TEST_F(CliTest, BadOptionsAreOneErrorLineAndExitTwo) {
+  // The options are checked before the drive is read: the drive need not exist.
+  const RunResult result = Run({"surface", "--from-gt", (dir_ / "no_drive").string(), "--out",
+                                (dir_ / "out").string(), "--init-keyframes", "0"});
+  EXPECT_EQ(result.exit_code, 2);
+  const std::vector<std::string> lines = Lines(result.err);
+  ASSERT_EQ(lines.size(), 1u) << result.err;
+  EXPECT_EQ(lines[0].rfind("omnisculpt: error: invalid options: SculptorOptions.init_keyframes", 0),
+            0u)
+      << lines[0];
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+}
+
 TEST_F(CliTest, GlobalFlagsAreAcceptedAfterTheSubcommand) {
   const RunResult plain = Run({"calib", "show", "--default"});
   for (const char* flag : {"--quiet", "-q", "--verbose"}) {

@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "calib/error.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -38,6 +39,12 @@ TEST(PipelineFramePrefetcher, OptionsAreChecked) {
   FramePrefetcherOptions options;
   options.frames_ahead = 0;
   EXPECT_FALSE(options.Check().empty());
+  EXPECT_TRUE(testing::ThrowsOptionsError(
+      [&] {
+        FramePrefetcher prefetcher(
+            3, [](size_t frame) { return FakeImages(frame, 1); }, options);
+      },
+      "FramePrefetcherOptions.frames_ahead: expected"));
 }
 
 TEST(PipelineFramePrefetcher, DeliversEveryFrameInOrderWithItsImages) {

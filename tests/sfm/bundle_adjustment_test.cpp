@@ -6,6 +6,7 @@
 #include <random>
 
 #include "sfm/synthetic.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -185,6 +186,16 @@ TEST(BundleAdjustmentOptions, CheckRejectsBadValues) {
   options = BundleAdjustmentOptions();
   options.max_outlier_angle = -1.0;
   EXPECT_FALSE(options.Check().empty());
+}
+
+TEST(BundleAdjustment, BadOptionsThrowNamingTheField) {
+  const Rig rig = MakeSyntheticRingRig(2, false, 0.0);
+  BundleAdjustmentOptions options;
+  options.loss_scale = 0.0;
+  BundleAdjustmentProblem problem;
+  EXPECT_THROW(LocalBundleAdjust(rig, options, &problem), OptionsError);
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { LocalBundleAdjust(rig, options, &problem); },
+                                          "BundleAdjustmentOptions.loss_scale: expected"));
 }
 
 }  // namespace

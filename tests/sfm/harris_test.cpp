@@ -7,6 +7,7 @@
 #include <random>
 
 #include "sfm/synthetic.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -199,6 +200,28 @@ TEST(HarrisOptions, CheckRejectsBadValues) {
   options = HarrisOptions();
   options.sobel_aperture = 4;
   EXPECT_FALSE(options.Check().empty());
+}
+
+TEST(Harris, BadOptionsThrowNamingTheField) {
+  const cv::Mat image(120, 160, CV_8UC1, cv::Scalar(128));
+  HarrisOptions options;
+  options.sobel_aperture = 4;
+  EXPECT_THROW(DetectHarrisCorners(image, options), OptionsError);
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { DetectHarrisCorners(image, options); },
+                                          "HarrisOptions.sobel_aperture: expected"));
+  options = HarrisOptions();
+  options.downscale = 0.5;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { PrepareImage(image, options); },
+                                          "HarrisOptions.downscale"));
+}
+
+TEST(Harris, ImagesItCannotReadThrow) {
+  const HarrisOptions options;
+  EXPECT_THROW(PrepareImage(cv::Mat(), options), std::invalid_argument);
+  EXPECT_THROW(PrepareImage(cv::Mat(120, 160, CV_32FC1, cv::Scalar(0.5)), options),
+               std::invalid_argument);
+  EXPECT_THROW(DetectHarrisCorners(cv::Mat(120, 160, CV_8UC3, cv::Scalar(0, 0, 0)), options),
+               std::invalid_argument);
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <set>
 
 #include "sfm/synthetic.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -106,6 +107,13 @@ TEST(KeyframeSelection, DecisionRules) {
   EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kKeyframe);
   options.min_tracked_share = 1.5;
   EXPECT_FALSE(options.Check().empty());
+}
+
+TEST(KeyframeSelection, BadOptionsThrowNamingTheField) {
+  KeyframeSelectionOptions options;
+  options.min_tracked_share = 1.5;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { DecideKeyframe(KeyframeCandidate(), options); },
+                                          "KeyframeSelectionOptions.min_tracked_share"));
 }
 
 }  // namespace

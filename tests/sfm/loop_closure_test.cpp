@@ -1,4 +1,4 @@
-// Place recognition of loop closure (issue 9) on the short synthetic drive (fixture
+// Place recognition of loop closure on the short synthetic drive (fixture
 // short_drive): the end of the drive, which passes the start again, is recognised among frames
 // far back in time, also when the ring of cameras is rotated.
 
@@ -10,6 +10,8 @@
 
 #include "calib/drive.h"
 #include "calib/tum.h"
+#include "sfm/synthetic.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -86,6 +88,24 @@ TEST(LoopDetectorShortDrive, RecognisesTheStartAtTheEndEvenWithTheRingRotated) {
   EXPECT_EQ(turned.keyframe, found.keyframe);
   EXPECT_EQ(turned.shift, 1);
   EXPECT_NEAR(turned.score, found.score, 1e-6);
+}
+
+TEST(LoopCloser, BadOptionsThrowNamingTheField) {
+  const Rig rig = MakeSyntheticRingRig(4, false, 0.1);
+  LoopClosureOptions options;
+  options.detection.min_score = 2.0;
+  EXPECT_THROW((LoopCloser{rig, options}), OptionsError);
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { LoopCloser closer(rig, options); },
+                                          "LoopClosureOptions.detection.min_score: expected"));
+  options = LoopClosureOptions();
+  options.central_relative_pose.ransac.max_iterations = 0;
+  EXPECT_TRUE(testing::ThrowsOptionsError(
+      [&] { LoopCloser closer(rig, options); },
+      "LoopClosureOptions.central_relative_pose.ransac.max_iterations"));
+  LoopDetectionOptions detection;
+  detection.min_keyframe_gap = 0;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { LoopDetector detector(rig, detection); },
+                                          "LoopDetectionOptions.min_keyframe_gap"));
 }
 
 }  // namespace

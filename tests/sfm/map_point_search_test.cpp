@@ -8,6 +8,7 @@
 #include "sfm/harris.h"
 #include "sfm/synthetic.h"
 #include "sfm/track_builder.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -206,6 +207,17 @@ TEST(MapPointSearchOptions, ChecksItsFields) {
   TrackBuilderOptions builder;
   builder.map_search.half_window = 0;
   EXPECT_EQ(builder.Check().rfind("map_search.", 0), 0u);
+}
+
+TEST(MapPointSearch, BadOptionsThrowNamingTheField) {
+  const Rig rig = TwoCameraRig();
+  MapPointSearchOptions options;
+  options.half_window = 0;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { MapPointSearch search(rig, options, 1.0); },
+                                          "MapPointSearchOptions.half_window"));
+  EXPECT_TRUE(
+      testing::ThrowsOptionsError([&] { MapPointSearch search(rig, MapPointSearchOptions(), 0.0); },
+                                  "MapPointSearch.downscale"));
 }
 
 }  // namespace

@@ -1,10 +1,12 @@
-// The Sim(3) pose graph of loop closure (issue 9): a drifted loop is pulled back to the truth.
+// The Sim(3) pose graph of loop closure: a drifted loop is pulled back to the truth.
 
 #include "sfm/pose_graph.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -97,6 +99,18 @@ TEST(PoseGraph, OptionsCheck) {
   PoseGraphOptions options;
   options.scale_weight = 0.0;
   EXPECT_FALSE(options.Check().empty());
+}
+
+TEST(PoseGraph, BadOptionsThrowNamingTheField) {
+  std::vector<Sim3d> nodes = CircleTruth();
+  PoseGraphOptions options;
+  options.scale_weight = 0.0;
+  const std::vector<PoseGraphEdge> edges = {{0, 1, RelativeSim3(nodes[0], nodes[1])}};
+  EXPECT_THROW(OptimizePoseGraph(edges, {0}, options, &nodes), OptionsError);
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { OptimizePoseGraph(edges, {0}, options, &nodes); },
+                                          "PoseGraphOptions."));
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { OptimizePoseGraph(edges, {0}, options, &nodes); },
+                                          "scale_weight"));
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "sfm/synthetic.h"
+#include "tests/calib/options_error_check.h"
 #include "tests/sfm/test_util.h"
 
 namespace omni {
@@ -69,6 +70,15 @@ TEST(RansacOptions, CheckRejectsBadValues) {
   options = RansacOptions();
   options.confidence = 1.0;
   EXPECT_FALSE(options.Check().empty());
+}
+
+TEST(CentralRelativePose, BadOptionsThrowNamingTheField) {
+  CentralRelativePoseOptions options;
+  options.ransac.max_angle_error = 0.0;
+  Rigid3d cam1_from_cam2;
+  EXPECT_TRUE(testing::ThrowsOptionsError(
+      [&] { EstimateCentralRelativePose({}, {}, options, &cam1_from_cam2); },
+      "CentralRelativePoseOptions.ransac.max_angle_error"));
 }
 
 }  // namespace

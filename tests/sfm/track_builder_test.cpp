@@ -6,6 +6,7 @@
 #include <set>
 
 #include "sfm/synthetic.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -144,6 +145,31 @@ TEST(TrackBuilder, SearchesAroundPredictedPixels) {
   plain.AddFrame({MakeSyntheticTexture(400, 300, {0, 0}, 250, 9)});
   EXPECT_LT(plain.AddFrame({MakeSyntheticTexture(400, 300, shift, 250, 9)}).num_matched,
             0.1 * first.observations.size());
+}
+
+TEST(TrackBuilder, BadOptionsThrowNamingTheField) {
+  const Rig rig = MakeSyntheticRingRig(2, false, 0.0);
+  TrackBuilderOptions options;
+  options.harris.sobel_aperture = 4;
+  EXPECT_THROW((TrackBuilder{rig, options}), OptionsError);
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { TrackBuilder builder(rig, options); },
+                                          "TrackBuilderOptions.harris.sobel_aperture"));
+  options = TrackBuilderOptions();
+  options.map_search.min_zncc = 1.5;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { TrackBuilder builder(rig, options); },
+                                          "TrackBuilderOptions.map_search.min_zncc"));
+  options = TrackBuilderOptions();
+  options.search_radius = 0.0;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { TrackBuilder builder(rig, options); },
+                                          "TrackBuilderOptions.search_radius: expected"));
+}
+
+TEST(TrackBuilder, AFrameWithTheWrongNumberOfImagesThrows) {
+  const Rig rig = MakeSyntheticRingRig(2, false, 0.0);
+  TrackBuilder builder(rig, TrackBuilderOptions());
+  const std::vector<cv::Mat> one_image = {
+      cv::Mat(rig.cameras[0].height, rig.cameras[0].width, CV_8UC1, cv::Scalar(0))};
+  EXPECT_THROW(builder.AddFrame(one_image), std::invalid_argument);
 }
 
 }  // namespace

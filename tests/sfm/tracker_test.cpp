@@ -8,6 +8,7 @@
 #include <set>
 
 #include "sfm/synthetic.h"
+#include "tests/calib/options_error_check.h"
 
 namespace omni {
 namespace {
@@ -388,6 +389,24 @@ TEST_P(TrackerReobservationTest, MapPointSearchLengthensFragmentedTracks) {
 
 INSTANTIATE_TEST_SUITE_P(Modes, TrackerReobservationTest,
                          ::testing::Values(Case{true, 0.05}, Case{false, 0.3}));
+
+TEST(Tracker, BadOptionsThrowNamingTheField) {
+  const Rig rig = MakeSyntheticRingRig(2, false, 0.0);
+  TrackerOptions options;
+  options.keyframes.min_tracked_share = 1.5;
+  EXPECT_THROW((Tracker{rig, options}), OptionsError);
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { Tracker tracker(rig, options); },
+                                          "TrackerOptions.keyframes.min_tracked_share: expected"));
+  options = TrackerOptions();
+  options.resection_ransac.confidence = 1.0;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { Tracker tracker(rig, options); },
+                                          "TrackerOptions.resection_ransac.confidence"));
+  options = TrackerOptions();
+  options.num_free_keyframes = 0;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { Tracker tracker(rig, options); },
+                                          "TrackerOptions.num_free_keyframes"));
+  EXPECT_THROW((Tracker{Rig(), TrackerOptions()}), std::invalid_argument);  // no camera
+}
 
 }  // namespace
 }  // namespace omni

@@ -12,6 +12,7 @@
 #include <random>
 
 #include "surface/manifold_check.h"
+#include "tests/calib/options_error_check.h"
 #include "tests/surface/step6_scenes.h"
 
 namespace omni {
@@ -63,7 +64,7 @@ RunSummary RunStreet(bool batch_init, EnclosingMode enclosing,
   options.batch_init = batch_init;
   options.enclosing = enclosing;
   // The Delaunay positions: ExpectStreetCarved counts vertices exactly on the walls (step 6
-  // smoothing, issue 7, moves the output vertices).
+  // smoothing moves the output vertices).
   options.smoothing.enabled = false;
   // Without batch, s is given so that every keyframe is processed (and checked) on arrival.
   if (!batch_init) options.scale = kSpacing;
@@ -330,6 +331,22 @@ TEST(SculptorOptions, CheckRejectsBadValues) {
   o.min_aperture_deg = 180.0;
   EXPECT_NE(o.Check(), "");
   EXPECT_THROW(IncrementalSculptor{o}, std::invalid_argument);
+}
+
+TEST(IncrementalSculptor, BadOptionsThrowNamingTheField) {
+  SculptorOptions o;
+  o.init_keyframes = 0;
+  EXPECT_THROW(IncrementalSculptor{o}, OptionsError);
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { IncrementalSculptor sculptor(o); },
+                                          "SculptorOptions.init_keyframes"));
+  o = SculptorOptions();
+  o.smoothing.lambda = 2.0;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { IncrementalSculptor sculptor(o); },
+                                          "SculptorOptions.smoothing.lambda"));
+  o = SculptorOptions();
+  o.genus.max_group_cells = -1;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { IncrementalSculptor sculptor(o); },
+                                          "SculptorOptions.genus.max_group_cells"));
 }
 
 }  // namespace

@@ -1,6 +1,6 @@
 #pragma once
 // Writing files so that nothing half-written looks complete: the content goes to
-// "<name>.tmp" and is renamed over <name> only when it was written whole (DESIGN.md §3).
+// "<name>.tmp" and is renamed over <name> only when it was written whole (docs/design.md §4).
 
 #include <filesystem>
 #include <functional>

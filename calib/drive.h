@@ -1,5 +1,5 @@
 #pragma once
-// A drive folder (DESIGN.md §4):
+// A drive folder (docs/design.md §5):
 //   drive/rig.json
 //   drive/images/<camera name>/<frame>.png|jpg     same frame names in every camera folder
 //   drive/gt/poses.tum, drive/gt/mesh.ply           optional ground truth

@@ -1,5 +1,5 @@
 #pragma once
-// Typed ids with an explicit invalid value (DESIGN.md §3), so that a keyframe id cannot be
+// Typed ids with an explicit invalid value (docs/design.md §3), so that a keyframe id cannot be
 // passed where a point id is expected.
 
 #include <cstdint>

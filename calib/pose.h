@@ -1,6 +1,6 @@
 #pragma once
 // Rigid and similarity transforms named by their frames: b_from_a maps coordinates in frame a
-// to frame b, and c_from_a = c_from_b * b_from_a (DESIGN.md §3).
+// to frame b, and c_from_a = c_from_b * b_from_a (docs/design.md §3).
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>

@@ -1,6 +1,6 @@
 #pragma once
 // A rig: any number of cameras (1 and up), each with its cam_from_rig. The rig frame is whatever
-// those transforms define (DESIGN.md §4). In central mode the SfM treats the rig as one camera
+// those transforms define (docs/design.md §5). In central mode the SfM treats the rig as one camera
 // whose single centre is the mean of the camera centres (the paper's approximation).
 
 #include <optional>

@@ -1,5 +1,5 @@
 #pragma once
-// rig.json (DESIGN.md §4) reading with validation, and writing.
+// rig.json (docs/design.md §5) reading with validation, and writing.
 
 #include <filesystem>
 #include <string>

@@ -1,5 +1,5 @@
 #pragma once
-// A blocking queue of bounded capacity joining two threads (DESIGN.md §1): Push blocks while
+// A blocking queue of bounded capacity joining two threads (docs/design.md §8): Push blocks while
 // the queue is full (backpressure: the producer waits instead of the memory growing), Pop
 // blocks while it is empty. Close() wakes both sides: Push then refuses, Pop drains what is
 // left and then returns nothing.

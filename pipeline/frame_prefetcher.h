@@ -1,5 +1,5 @@
 #pragma once
-// Decodes the images of the next frames of a drive on a thread of its own (issue 9), so that
+// Decodes the images of the next frames of a drive on a thread of its own, so that
 // the SfM thread of `omnisculpt reconstruct` and `omnisculpt sfm` does not wait ~3 ms per PNG:
 // frames are delivered in order, each with its images or the error that reading one of them
 // raised (the caller reports and skips it, or rethrows). At most frames_ahead frames are decoded

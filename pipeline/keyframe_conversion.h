@@ -1,5 +1,5 @@
 #pragma once
-// The sfm→surface contract of DESIGN.md §4 in code: a keyframe finalised by the tracker (its
+// The sfm→surface contract of docs/design.md §7 in code: a keyframe finalised by the tracker (its
 // pose and points no longer move) as the keyframe the incremental sculptor takes. The one
 // conversion between the two modules; sfm/ and surface/ never include each other.
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Per-keyframe timing summary of `omnisculpt surface` (issue 6 benchmark) from OUT/stats/keyframes.csv.
+"""Per-keyframe timing summary of `omnisculpt surface` from OUT/stats/keyframes.csv.
 
 Prints, over the incremental keyframes (the batch row excluded): ms per keyframe median / p95 / max
 for the whole keyframe and for steps 1-5 alone (without step 6), the mean ms of each step, max |E|,

@@ -1,5 +1,5 @@
 #pragma once
-// Local bundle adjustment of keyframe poses and points on bearings (DESIGN.md §6, issue 8): the
+// Local bundle adjustment of keyframe poses and points on bearings (docs/design.md §9): the
 // newest keyframes free, older ones fixed (they fix the gauge), an angular residual on the
 // tangent plane of each observed bearing, a robust loss in radians, a Schur-based solver, and
 // the outlier observations removed afterwards. Central mode treats the rig as one camera at

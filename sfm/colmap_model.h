@@ -1,6 +1,6 @@
 #pragma once
 // A COLMAP text model (cameras.txt, images.txt, points3D.txt; colmap.github.io/format.html)
-// of the finalised keyframes of the tracker (issue 8): one COLMAP camera per rig camera (models
+// of the finalised keyframes of the tracker: one COLMAP camera per rig camera (models
 // PINHOLE, OPENCV or FULL_OPENCV, OPENCV_FISHEYE from calib's pinhole, opencv, fisheye), one
 // image per camera per keyframe named by `image_name` (e.g. "images/cam0/000123.png"), and one
 // 3-D point per finalised point with its observations as 2-D points. COLMAP puts pixel centres

@@ -1,6 +1,6 @@
 #pragma once
 // Harris corners with an even spatial spread (a quota per grid bucket) and subpixel refinement
-// (paper §2 after Mouragnon et al.: Harris points matched along the sequence; issue 8).
+// (paper §2 after Mouragnon et al.: Harris points matched along the sequence).
 //
 // Images go through PrepareImage once (grey, 8 bits, optionally downscaled: the paper halves
 // the Ladybug images to 512×384); detection and matching work in the prepared image's pixels,

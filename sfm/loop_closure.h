@@ -1,5 +1,5 @@
 #pragma once
-// Place recognition for loop closure (DESIGN.md §6, issue 9), first part: a compact appearance
+// Place recognition for loop closure (docs/design.md §9), first part: a compact appearance
 // descriptor per keyframe (a small zero-mean, unit-norm thumbnail per camera) and a search
 // among keyframes far enough back in time. For a ring of side cameras a rotation of the
 // vehicle is a cyclic shift of the cameras, so every shift of the ring is scored. Then the

@@ -1,5 +1,5 @@
 #pragma once
-// Map-point re-observation ("track the local map": Mouragnon et al. 2007, ORB-SLAM; issue 8):
+// Map-point re-observation ("track the local map": Mouragnon et al. 2007, ORB-SLAM):
 // once a frame's pose is resected, the live map points of the recent keyframes that the frame
 // does not observe in a camera are projected into that camera (every camera of the rig, not
 // only the one that saw the point last: a point leaving camera A for camera B, or seen by two

@@ -1,5 +1,5 @@
 #pragma once
-// A similarity pose graph (DESIGN.md §6, issue 9): after a loop closure, the keyframe poses are
+// A similarity pose graph (docs/design.md §9): after a loop closure, the keyframe poses are
 // corrected as Sim(3) nodes world_from_keyframe (rotation, translation and scale, so that the
 // scale drift of a monocular-like SfM is corrected too, Strasdat et al., RSS 2010) under
 // relative Sim(3) edges: the odometry edges between consecutive keyframes measured on the

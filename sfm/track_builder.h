@@ -11,7 +11,7 @@
 // keyframe's track ids. Once the tracker has resected the frame, it asks for its map points
 // to be searched among the corners whose track has no point (MapPointSearcher, matching of
 // sfm/map_point_search.h): a corner found to be a map point takes the point's track, in any
-// camera, which continues tracks across overlapping neighbour cameras (issue 8).
+// camera, which continues tracks across overlapping neighbour cameras.
 
 #include <Eigen/Core>
 #include <functional>

@@ -1,5 +1,5 @@
 #pragma once
-// Skeleton of the incremental rig SfM on bearings (issue 8; DESIGN.md §6): frames come as
+// Skeleton of the incremental rig SfM on bearings (docs/design.md §9): frames come as
 // bearings already associated into tracks (the matching layer's job); the tracker initialises
 // from two keyframes (relative pose in RANSAC + triangulation), resects every frame (P3P / GP3P
 // in RANSAC), selects keyframes (Mouragnon et al.), triangulates new points, runs the local
@@ -7,7 +7,7 @@
 // window. Central mode: the rig is one camera at the mean camera centre; non-central mode: the
 // true cam_from_rig offsets throughout. Poses are always world_from_rig of the rig frame.
 //
-// Long tracks (issue 8): once a frame is resected, the live points of the recent keyframes are
+// Long tracks: once a frame is resected, the live points of the recent keyframes are
 // projected into every camera where the frame does not observe them and searched by the front
 // end (MapPointSearchFn, sfm/map_point_search.h); a match re-labels the observation with the
 // point's track. A point may so have two observations in one frame (and one keyframe), in two
@@ -38,7 +38,7 @@ struct TrackerOptions {
   TriangulationOptions triangulation;
   KeyframeSelectionOptions keyframes;
   BundleAdjustmentOptions bundle_adjustment;  // its mode follows `central`
-  int num_free_keyframes = 3;                 // issue 8: newest n keyframes free (default 3)
+  int num_free_keyframes = 3;                 // the newest n keyframes are free
   int num_fixed_keyframes = 7;                // and the N before them fixed (7–10)
   // Threads of the global adjustment after a loop closure (a one-off solve of the whole map,
   // the largest single cost of a closure: the SfM thread waits for it).
@@ -99,8 +99,8 @@ struct FinalizedPoint {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
   std::vector<FinalizedRay> rays;
 };
-// A keyframe that left the adjustment window: its pose and points no longer move (DESIGN.md
-// §4: the keyframe handed to the surface).
+// A keyframe that left the adjustment window: its pose and points no longer move (docs/design.md
+// §7: the keyframe handed to the surface).
 struct FinalizedKeyframe {
   int keyframe = -1;
   int frame = -1;
@@ -160,7 +160,7 @@ class Tracker {
   std::vector<Rigid3d> KeyframePoses() const;
   std::vector<int> KeyframeFrames() const;
 
-  // ---- Map access and correction (loop closure, issue 9) ----
+  // ---- Map access and correction (loop closure) ----
   // The live points a keyframe observes: (track id, position in the world).
   std::vector<std::pair<int, Eigen::Vector3d>> KeyframeTrackPoints(int keyframe) const;
   // Moves keyframe k by the similarity of the world new_from_old[k] (one per keyframe; the rig

@@ -1,7 +1,7 @@
 #pragma once
 // Triangulation of one point from several rays (optical centre + bearing, both in the world
 // frame): the point nearest to all rays in the least-squares sense (midpoint method), then
-// the checks that decide whether it is kept (issue 8: minimum ray angle, positive depth in
+// the checks that decide whether it is kept (minimum ray angle, positive depth in
 // every view, small angular error).
 
 #include <Eigen/Core>

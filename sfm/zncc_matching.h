@@ -2,7 +2,7 @@
 // Matching of corners between two prepared images by the zero-mean normalised cross-correlation
 // (ZNCC) of small windows, each corner of the first image searching only inside its predicted
 // region of the second (from the motion model, or by reprojection once the pose is known),
-// with a distinctiveness (ratio) check and a mutual-best check (issue 8).
+// with a distinctiveness (ratio) check and a mutual-best check.
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>

@@ -10,7 +10,7 @@
 // seed by largest counter, of doubling size up to a bound. Seeds are the cells of F \ O touching
 // δO, most crossed first (the most certain free space first).
 //
-// Cost (issue 6): a group is tested before its local χ is counted (most groups fail), the vertex
+// Cost: a group is tested before its local χ is counted (most groups fail), the vertex
 // that failed last is tested first, and a group that failed since O last changed is not tested
 // again (seeds of one small component grow the same group): the outcome is the same.
 

@@ -1,6 +1,6 @@
 #pragma once
 // Incremental sculpting of a 2-manifold surface in a 3D Delaunay triangulation (Litvinov and
-// Lhuillier, BMVC 2013, sections 3–5). The input is the keyframe stream of DESIGN.md §4; the
+// Lhuillier, BMVC 2013, sections 3–5). The input is the keyframe stream of docs/design.md §7; the
 // output is δO, the border of the carved free space O, as a triangle mesh oriented towards O.
 
 #include <Eigen/Core>
@@ -27,7 +27,7 @@ struct SurfacePoint {
   std::vector<SurfaceRay> rays;
 };
 
-// The only sfm→surface contract (DESIGN.md §4): the points P_t of keyframe t.
+// The only sfm→surface contract (docs/design.md §7): the points P_t of keyframe t.
 struct SurfaceKeyframe {
   KeyframeId id;
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // c_t

@@ -10,7 +10,7 @@
 // (exact predicates) and a vertex whose triangles meet one goes back to its previous position,
 // then to its own point.
 //
-// Cost (issue 6): positions, umbrella hashes and the scratch of a call are dense arrays by vertex
+// Cost: positions, umbrella hashes and the scratch of a call are dense arrays by vertex
 // index (no hash map in the inner loops); the δO facets around a vertex are gathered once per
 // call and shared by the checks of all its neighbours; a pair of triangles whose boxes miss, or
 // one certainly on one side of the other's plane (a filter in doubles with a wide error bound),

@@ -1,6 +1,6 @@
 #pragma once
 // INTERNAL to surface/*.cpp: the CGAL types behind DelaunayMesh. Never include this from a
-// public header (DESIGN.md §2: CGAL types stay out of public headers).
+// public header (docs/design.md §2: CGAL types stay out of public headers).
 
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Delaunay_triangulation_cell_base_3.h>

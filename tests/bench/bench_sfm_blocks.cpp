@@ -76,7 +76,7 @@ void BM_NoncentralAbsolutePose(benchmark::State& state) {
 }
 BENCHMARK(BM_NoncentralAbsolutePose)->Unit(benchmark::kMillisecond);
 
-// Ten keyframes (7 fixed, 3 free, issue 8's window), 2000 points; central mode on a rig whose
+// Ten keyframes (7 fixed, 3 free, the local window), 2000 points; central mode on a rig whose
 // cameras share one centre, so that the model is exact.
 void BM_LocalBundleAdjustment(benchmark::State& state) {
   const Rig rig = MakeSyntheticRingRig(5, true, 0.0);

@@ -1,4 +1,4 @@
-// The incremental sculptor (surface/, issue 6) on a keyframe stream from a simulated perfect
+// The incremental sculptor (surface/) on a keyframe stream from a simulated perfect
 // SfM: per-keyframe time (median, p95, max), max |E|, the flatness ratio (mean time over the
 // last fifth of the incremental keyframes / over the first fifth) and the share of rejected
 // points, for both enclosing modes.

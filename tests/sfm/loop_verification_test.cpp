@@ -1,4 +1,4 @@
-// Geometric verification of a loop candidate (issue 9, sfm/loop_closure.h VerifyLoop): the
+// Geometric verification of a loop candidate (sfm/loop_closure.h VerifyLoop): the
 // relative pose of the rig from the matched bearings and the 3-D similarity of the matched map
 // points, which must agree, on synthetic revisits with ground truth; and the linear appearance
 // search against the pairwise scores.

@@ -1,4 +1,4 @@
-// The exact shortcuts of steps 2 and 5 (issue 6): the memo of failed manifold tests (a failed
+// The exact shortcuts of steps 2 and 5: the memo of failed manifold tests (a failed
 // subtraction/addition test or several-at-once attempt is not run again while the stars it read
 // are unchanged) and the allocation-free star search give the same O, δO and stats as the
 // reference path (SculptorOptions::reference_manifold_tests) after every keyframe, in both

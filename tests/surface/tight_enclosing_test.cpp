@@ -1,4 +1,4 @@
-// The tight enclosing set (EnclosingMode::kConflictZones, issue 6): E is the union of the new
+// The tight enclosing set (EnclosingMode::kConflictZones): E is the union of the new
 // points' conflict zones plus a margin, widened after the shrink where O still meets them. After
 // every keyframe of a clean street (the tiny drive of sculptor_test.cpp) and of a noisy one, δO
 // is an oriented 2-manifold by the independent CheckManifold and O ⊆ F; no point is inserted

@@ -1,4 +1,4 @@
-// Rendering throughput of the synthetic drives (issue 4): rays per second and frames (six
+// Rendering throughput of the synthetic drives: rays per second and frames (six
 // images) per second on the `demo` city, PNG writing excluded; and the cost of building the
 // city. Run from a Release build: build/tests/bench/bench_synth.
 
@@ -7,8 +7,8 @@
 #include <memory>
 
 #include "apps/default_rig.h"
-#include "apps/synth/drive_writer.h"
-#include "apps/synth/renderer.h"
+#include "synth/drive_writer.h"
+#include "synth/renderer.h"
 
 namespace omni::synth {
 namespace {

@@ -71,6 +71,7 @@ bool ClosestPointCallback(RTCPointQueryFunctionArguments* args) {
 }  // namespace
 
 struct RayCaster::Impl {
+  RayCasterOptions options;
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
   Eigen::Vector3d origin;                 // subtracted from every coordinate before Embree sees it
@@ -84,7 +85,8 @@ struct RayCaster::Impl {
   }
 };
 
-RayCaster::RayCaster(const TriangleMesh& mesh) : impl_(std::make_unique<Impl>()) {
+RayCaster::RayCaster(const TriangleMesh& mesh, const RayCasterOptions& options)
+    : impl_(std::make_unique<Impl>()) {
   if (mesh.triangles.empty()) throw InputError("", "triangles", "the mesh has no triangle");
   const int num_vertices = static_cast<int>(mesh.vertices.size());
   for (const auto& tri : mesh.triangles) {
@@ -94,12 +96,14 @@ RayCaster::RayCaster(const TriangleMesh& mesh) : impl_(std::make_unique<Impl>())
     }
   }
   Impl& impl = *impl_;
+  impl.options = options;
   impl.min_corner = impl.max_corner = mesh.vertices[mesh.triangles[0][0]];
   for (const auto& v : mesh.vertices) {
     impl.min_corner = impl.min_corner.cwiseMin(v);
     impl.max_corner = impl.max_corner.cwiseMax(v);
   }
-  impl.origin = 0.5 * (impl.min_corner + impl.max_corner);
+  impl.origin = options.recentre ? Eigen::Vector3d(0.5 * (impl.min_corner + impl.max_corner))
+                                 : Eigen::Vector3d::Zero();
   impl.vertices.reserve(mesh.vertices.size());
   for (const auto& v : mesh.vertices) impl.vertices.push_back(v - impl.origin);
   impl.triangles = mesh.triangles;
@@ -107,7 +111,7 @@ RayCaster::RayCaster(const TriangleMesh& mesh) : impl_(std::make_unique<Impl>())
   impl.device = rtcNewDevice(nullptr);
   if (!impl.device) throw std::runtime_error("Embree: cannot create a device");
   impl.scene = rtcNewScene(impl.device);
-  rtcSetSceneFlags(impl.scene, RTC_SCENE_FLAG_ROBUST);
+  if (options.robust) rtcSetSceneFlags(impl.scene, RTC_SCENE_FLAG_ROBUST);
   rtcSetSceneBuildQuality(impl.scene, RTC_BUILD_QUALITY_HIGH);
   RTCGeometry geometry = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto* vertex_buffer = static_cast<float*>(
@@ -140,6 +144,7 @@ RayHit RayCaster::Cast(const Ray& ray) const {
   const Eigen::Vector3d origin = ray.origin - impl_->origin;
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
+  if (impl_->options.coherent) context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   RTCRayHit ray_hit;
   ray_hit.ray.org_x = static_cast<float>(origin.x());
   ray_hit.ray.org_y = static_cast<float>(origin.y());
@@ -161,8 +166,51 @@ RayHit RayCaster::Cast(const Ray& ray) const {
   if (ray_hit.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
     hit.triangle = static_cast<int>(ray_hit.hit.primID);
     hit.distance = ray_hit.ray.tfar;
+    hit.u = ray_hit.hit.u;
+    hit.v = ray_hit.hit.v;
   }
   return hit;
+}
+
+void RayCaster::CastPacket(const Ray* rays, const bool* valid, RayHit* hits) const {
+  static_assert(kPacketSize == 8, "CastPacket traces Embree's 8-wide packets");
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  if (impl_->options.coherent) context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  RTCRayHit8 packet;
+  alignas(32) int valid_mask[8];
+  for (int k = 0; k < 8; ++k) {
+    valid_mask[k] = valid[k] ? -1 : 0;
+    const Eigen::Vector3d origin =
+        valid[k] ? Eigen::Vector3d(rays[k].origin - impl_->origin) : Eigen::Vector3d::Zero();
+    const Eigen::Vector3d direction = valid[k] ? rays[k].direction : Eigen::Vector3d::UnitZ();
+    packet.ray.org_x[k] = static_cast<float>(origin.x());
+    packet.ray.org_y[k] = static_cast<float>(origin.y());
+    packet.ray.org_z[k] = static_cast<float>(origin.z());
+    packet.ray.dir_x[k] = static_cast<float>(direction.x());
+    packet.ray.dir_y[k] = static_cast<float>(direction.y());
+    packet.ray.dir_z[k] = static_cast<float>(direction.z());
+    packet.ray.tnear[k] = 0.0f;
+    packet.ray.tfar[k] = valid[k] && std::isfinite(rays[k].max_distance)
+                             ? static_cast<float>(rays[k].max_distance)
+                             : std::numeric_limits<float>::infinity();
+    packet.ray.mask[k] = 0xFFFFFFFFu;
+    packet.ray.flags[k] = 0;
+    packet.ray.time[k] = 0.0f;
+    packet.ray.id[k] = k;
+    packet.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+    packet.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+  }
+  rtcIntersect8(valid_mask, impl_->scene, &context, &packet);
+  for (int k = 0; k < 8; ++k) {
+    hits[k] = RayHit{};
+    if (valid[k] && packet.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID) {
+      hits[k].triangle = static_cast<int>(packet.hit.primID[k]);
+      hits[k].distance = packet.ray.tfar[k];
+      hits[k].u = packet.hit.u[k];
+      hits[k].v = packet.hit.v[k];
+    }
+  }
 }
 
 std::vector<RayHit> RayCaster::CastMany(const std::vector<Ray>& rays) const {

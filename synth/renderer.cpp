@@ -1,6 +1,5 @@
 #include "synth/renderer.h"
 
-#include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -9,10 +8,10 @@
 #include <map>
 #include <mutex>
 #include <sstream>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "raycast/raycast.h"
 #include "synth/hash.h"
 #include "synth/texture.h"
 
@@ -34,40 +33,21 @@ struct SceneRenderer::Impl {
   uint64_t seed;
   SynthRenderOptions options;
   Eigen::Vector3d sun;
-  RTCDevice device = nullptr;
-  RTCScene rtc_scene = nullptr;
+  RayCaster caster;  // the city as it is (not recentred), traced coherently
   mutable std::mutex bearings_mutex;
   mutable std::map<std::string, std::unique_ptr<std::vector<Eigen::Vector3d>>> bearings_cache;
 
   Impl(const CityScene& s, uint64_t sd, const SynthRenderOptions& o)
-      : scene(s), seed(sd), options(o) {
+      : scene(s), seed(sd), options(o), caster(s.mesh, CasterOptions()) {
     sun = Eigen::Vector3d(o.sun_direction[0], o.sun_direction[1], o.sun_direction[2]).normalized();
-    device = rtcNewDevice(nullptr);
-    if (!device) throw std::runtime_error("Embree: rtcNewDevice failed");
-    rtc_scene = rtcNewScene(device);
-    rtcSetSceneBuildQuality(rtc_scene, RTC_BUILD_QUALITY_HIGH);
-    RTCGeometry geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    const size_t num_vertices = scene.mesh.vertices.size();
-    const size_t num_triangles = scene.mesh.triangles.size();
-    auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
-        geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), num_vertices));
-    auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-        geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), num_triangles));
-    for (size_t i = 0; i < num_vertices; ++i) {
-      for (int k = 0; k < 3; ++k)
-        vertices[3 * i + k] = static_cast<float>(scene.mesh.vertices[i][k]);
-    }
-    for (size_t i = 0; i < num_triangles; ++i) {
-      for (int k = 0; k < 3; ++k)
-        indices[3 * i + k] = static_cast<unsigned>(scene.mesh.triangles[i][k]);
-    }
-    rtcCommitGeometry(geometry);
-    rtcAttachGeometry(rtc_scene, geometry);
-    rtcReleaseGeometry(geometry);
-    rtcCommitScene(rtc_scene);
-    if (rtcGetDeviceError(device) != RTC_ERROR_NONE) {
-      throw std::runtime_error("Embree: building the scene failed");
-    }
+  }
+
+  static RayCasterOptions CasterOptions() {
+    RayCasterOptions caster_options;
+    caster_options.recentre = false;
+    caster_options.robust = false;
+    caster_options.coherent = true;
+    return caster_options;
   }
 
   // Unit bearings of a camera's pixel centres (NaN where Unproject fails), computed once.
@@ -95,76 +75,38 @@ struct SceneRenderer::Impl {
     return *bearings;
   }
 
-  ~Impl() {
-    if (rtc_scene) rtcReleaseScene(rtc_scene);
-    if (device) rtcReleaseDevice(device);
-  }
-
   // Triangle index and distance of the first hit, or false.
   bool Intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
                  uint32_t* triangle, float* distance) const {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-    RTCRayHit ray_hit;
-    ray_hit.ray.org_x = static_cast<float>(origin.x());
-    ray_hit.ray.org_y = static_cast<float>(origin.y());
-    ray_hit.ray.org_z = static_cast<float>(origin.z());
-    ray_hit.ray.dir_x = static_cast<float>(direction.x());
-    ray_hit.ray.dir_y = static_cast<float>(direction.y());
-    ray_hit.ray.dir_z = static_cast<float>(direction.z());
-    ray_hit.ray.tnear = 0.0f;
-    ray_hit.ray.tfar = std::numeric_limits<float>::infinity();
-    ray_hit.ray.mask = 0xFFFFFFFFu;
-    ray_hit.ray.flags = 0;
-    ray_hit.ray.time = 0.0f;
-    ray_hit.ray.id = 0;
-    ray_hit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    ray_hit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(rtc_scene, &context, &ray_hit);
-    if (ray_hit.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-    *triangle = ray_hit.hit.primID;
-    *distance = ray_hit.ray.tfar;
+    Ray ray;
+    ray.origin = origin;
+    ray.direction = direction;
+    const RayHit hit = caster.Cast(ray);
+    if (!hit.Hit()) return false;
+    *triangle = static_cast<uint32_t>(hit.triangle);
+    *distance = static_cast<float>(hit.distance);
     return true;
   }
 
-  // Shaded albedo seen along a unit ray; `pixel_angle` is the angle one pixel spans.
-  // First hits of up to 8 rays from one origin (Embree's 8-wide packet; ray k is valid when
-  // valid[k]). triangles[k] is kNoHit on a miss.
+  // First hits of up to 8 rays from one origin (one packet of the ray caster; ray k is valid
+  // when valid[k]). triangles[k] is kNoHit on a miss.
   void Intersect8(const Eigen::Vector3d& origin, const Eigen::Vector3d* directions,
                   const bool* valid, uint32_t* triangles, float* distances) const {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-    RTCRayHit8 packet;
-    alignas(32) int valid_mask[8];
+    static_assert(RayCaster::kPacketSize == 8, "the renderer casts its pixels 8 at a time");
+    Ray rays[8];
+    RayHit hits[8];
     for (int k = 0; k < 8; ++k) {
-      valid_mask[k] = valid[k] ? -1 : 0;
-      packet.ray.org_x[k] = static_cast<float>(origin.x());
-      packet.ray.org_y[k] = static_cast<float>(origin.y());
-      packet.ray.org_z[k] = static_cast<float>(origin.z());
-      const Eigen::Vector3d d = valid[k] ? directions[k] : Eigen::Vector3d::UnitZ();
-      packet.ray.dir_x[k] = static_cast<float>(d.x());
-      packet.ray.dir_y[k] = static_cast<float>(d.y());
-      packet.ray.dir_z[k] = static_cast<float>(d.z());
-      packet.ray.tnear[k] = 0.0f;
-      packet.ray.tfar[k] = std::numeric_limits<float>::infinity();
-      packet.ray.mask[k] = 0xFFFFFFFFu;
-      packet.ray.flags[k] = 0;
-      packet.ray.time[k] = 0.0f;
-      packet.ray.id[k] = k;
-      packet.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
-      packet.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+      rays[k].origin = origin;
+      if (valid[k]) rays[k].direction = directions[k];
     }
-    rtcIntersect8(valid_mask, rtc_scene, &context, &packet);
+    caster.CastPacket(rays, valid, hits);
     for (int k = 0; k < 8; ++k) {
-      const bool hit = valid[k] && packet.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID;
-      triangles[k] = hit ? packet.hit.primID[k] : kNoHit;
-      distances[k] = hit ? packet.ray.tfar[k] : 0.0f;
+      triangles[k] = hits[k].Hit() ? static_cast<uint32_t>(hits[k].triangle) : kNoHit;
+      distances[k] = hits[k].Hit() ? static_cast<float>(hits[k].distance) : 0.0f;
     }
   }
 
-  // Shaded albedo of a hit along a unit ray; `pixel_angle` is the angle one pixel spans.
+  // The sky seen along a unit ray.
   Sample Sky(const Eigen::Vector3d& direction) const {
     Sample sample;
     const double elevation = std::max(0.0, direction.z());
@@ -173,6 +115,7 @@ struct SceneRenderer::Impl {
     return sample;
   }
 
+  // Shaded albedo of a hit along a unit ray; `pixel_angle` is the angle one pixel spans.
   Sample ShadeHit(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
                   uint32_t triangle, float distance, double pixel_angle) const {
     Sample sample;

@@ -1,5 +1,5 @@
 #pragma once
-// Ray casting of the synthetic city with Embree 3. Rays come from the calib camera models
+// Ray casting of the synthetic city (raycast/raycast.h). Rays come from the calib camera models
 // (Camera::Unproject, the pipeline's own code, distortion included) through each camera's true
 // pose (world_from_rig * rig_from_cam: the rig is rendered non-central).
 

@@ -11,9 +11,9 @@
 
 #include "apps/commands.h"
 #include "calib/error.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/rig_io.h"
-#include "eval/mesh_check.h"
 #include "eval/render.h"
 #include "eval/report.h"
 #include "raycast/raycast.h"

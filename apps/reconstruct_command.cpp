@@ -29,10 +29,10 @@
 #include "calib/atomic_file.h"
 #include "calib/drive.h"
 #include "calib/error.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
 #include "sfm/colmap_model.h"
-#include "surface/manifold_check.h"
 
 namespace omni {
 namespace {
@@ -214,7 +214,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
     queue_ms.push_back(row.queue_ms);
   }
   const size_t untracked = sfm.frames_not_tracked;
-  const ManifoldReport manifold = CheckManifold(result.mesh);
+  const MeshCheckReport manifold = CheckMesh(result.mesh);
   nlohmann::json summary = {
       {"drive", drive.folder().string()},
       {"mode", o.pipeline.tracker.central ? "central" : "non-central"},
@@ -225,7 +225,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
       {"keyframes", result.keyframes.size()},
       {"points", cloud.points.size()},
       {"triangles", result.mesh.triangles.size()},
-      {"manifold", manifold.IsOrientedManifold()},
+      {"manifold", manifold.ok},
       {"seconds", result.seconds},
       {"frames_per_second", result.frames_total / std::max(result.seconds, 1e-9)},
       {"sfm_seconds", result.sfm_seconds},
@@ -288,11 +288,11 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
       result.frames_total, result.skipped.size(), untracked, result.seconds,
       result.frames_total / std::max(result.seconds, 1e-9), result.keyframes.size(),
       cloud.points.size(), result.mesh.triangles.size(),
-      manifold.IsOrientedManifold() ? "yes" : "NO", Quantile(surface_ms, 0.5),
+      manifold.ok ? "yes" : "NO", Quantile(surface_ms, 0.5),
       Quantile(surface_ms, 0.95), result.queue_max_size, o.pipeline.queue_capacity,
       result.queue_blocked_seconds, result.loop_closures.size(), result.replay_seconds, out.c_str(),
       kSummaryFile);
-  if (!manifold.IsOrientedManifold()) {
+  if (!manifold.ok) {
     spdlog::error("reconstruct: the surface is not an oriented 2-manifold: {}", manifold.Summary());
     CommandExitCode() = 1;
   }

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "eval/mesh_check.h"
+#include "calib/mesh_check.h"
 #include "eval/pose_eval.h"
 #include "eval/render.h"
 #include "eval/surface_eval.h"

@@ -19,9 +19,9 @@
 
 #include "apps/pipeline/bounded_queue.h"
 #include "apps/pipeline/keyframe_conversion.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
-#include "eval/mesh_check.h"
 #include "eval/pose_eval.h"
 #include "surface/sculptor.h"
 #include "tests/apps/point_colors_check.h"

@@ -19,8 +19,8 @@
 
 #include "apps/surface/colmap_keyframes.h"
 #include "calib/error.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
-#include "eval/mesh_check.h"
 
 namespace omni {
 namespace {

@@ -1,5 +1,5 @@
 // `omnisculpt surface --from-gt` end to end on a short tiny synthetic drive: the
-// surface is a closed oriented 2-manifold by the independent mesh checker of eval/,
+// surface is a closed oriented 2-manifold by the independent mesh checker of calib/,
 // stats/keyframes.csv has one row per keyframe with the documented columns, few points are
 // rejected, and a missing drive is one error line with exit code 2.
 
@@ -17,9 +17,9 @@
 #include <string>
 #include <vector>
 
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
-#include "eval/mesh_check.h"
 #include "tests/apps/run_omnisculpt.h"
 #include "tests/calib/io_temp_dir.h"
 

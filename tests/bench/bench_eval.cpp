@@ -6,7 +6,7 @@
 
 #include <cmath>
 
-#include "eval/mesh_check.h"
+#include "calib/mesh_check.h"
 #include "eval/primitives.h"
 #include "eval/surface_eval.h"
 #include "raycast/raycast.h"

@@ -1,4 +1,4 @@
-// The incremental sculptor (surface/, issue 6) on a keyframe stream from a simulated perfect
+// The incremental sculptor (surface/) on a keyframe stream from a simulated perfect
 // SfM: per-keyframe time (median, p95, max), max |E|, the flatness ratio (mean time over the
 // last fifth of the incremental keyframes / over the first fifth) and the share of rejected
 // points, for both enclosing modes.
@@ -16,7 +16,7 @@
 #include <string>
 
 #include "apps/surface/gt_keyframes.h"
-#include "surface/manifold_check.h"
+#include "calib/mesh_check.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -143,7 +143,7 @@ void BM_Sculpt(benchmark::State& state) {
       std::fclose(f);
     }
   }
-  state.counters["manifold"] = CheckManifold(mesh).IsOrientedManifold() ? 1 : 0;
+  state.counters["manifold"] = CheckMesh(mesh).ok ? 1 : 0;
   state.SetLabel(description + ", " + std::to_string(stream.size()) +
                  " keyframes, E=" + (state.range(0) == 0 ? "ball" : "conflict zones"));
 }

@@ -1,4 +1,4 @@
-#include "eval/mesh_check.h"
+#include "calib/mesh_check.h"
 
 #include <gtest/gtest.h>
 

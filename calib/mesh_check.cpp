@@ -1,4 +1,4 @@
-#include "eval/mesh_check.h"
+#include "calib/mesh_check.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -264,10 +264,22 @@ MeshCheckReport CheckMesh(const TriangleMesh& mesh, const MeshCheckOptions& opti
   report.closed_manifold =
       manifold && report.boundary_edges == 0 && report.vertices_link_not_cycle == 0;
   report.oriented = report.misoriented_edges == 0;
-  report.ok = report.triangles > 0 &&
+  report.ok = (report.triangles > 0 || options.allow_empty) &&
               (report.closed_manifold || (options.allow_boundary && manifold)) && report.oriented &&
-              report.degenerate_triangles == 0;
+              report.degenerate_triangles == 0 && report.duplicate_triangles == 0;
   return report;
+}
+
+std::string MeshCheckReport::Summary() const {
+  std::ostringstream out;
+  out << "V=" << vertices - unreferenced_vertices << " E=" << edges << " F=" << triangles
+      << " chi=" << euler_characteristic << " components=" << components
+      << " degenerate=" << degenerate_triangles << " duplicate=" << duplicate_triangles
+      << " boundary_edges=" << boundary_edges << " nonmanifold_edges=" << nonmanifold_edges
+      << " misoriented_edges=" << misoriented_edges
+      << " vertices_link_not_cycle=" << vertices_link_not_cycle
+      << " nonmanifold_vertices=" << nonmanifold_vertices << (ok ? " ok" : " NOT ok");
+  return out.str();
 }
 
 std::string MeshCheckReport::ToText() const {

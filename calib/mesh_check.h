@@ -1,6 +1,9 @@
 #pragma once
-// Topological checks of a triangle mesh: is it a closed, consistently oriented
-// 2-manifold, and what are its components, Euler characteristic and genus.
+// The one topological check of a triangle mesh, used by mesh-check, eval, surface, reconstruct
+// and the sculptor's tests: is it a closed (or, when allowed, bounded), consistently oriented
+// 2-manifold without degenerate or duplicate triangles, and what are its components, Euler
+// characteristic and genus. It sees only the triangles, independently of any bookkeeping of
+// the code that made them.
 
 #include <string>
 #include <vector>
@@ -15,6 +18,9 @@ struct MeshCheckOptions {
   double degenerate_area_ratio = 1e-12;
   // Accept boundary edges (a 2-manifold with boundary) in MeshCheckReport::ok.
   bool allow_boundary = false;
+  // Accept a mesh without any triangle in MeshCheckReport::ok (the empty surface of a
+  // sculptor that has not carved anything yet).
+  bool allow_empty = false;
   // Largest number of components listed one by one in the report (the totals count all).
   int max_listed_components = 20;
 
@@ -54,8 +60,11 @@ struct MeshCheckReport {
 
   bool closed_manifold = false;  // no boundary, no non-manifold edge or vertex
   bool oriented = false;         // no misoriented edge
-  bool ok = false;               // 2-manifold (closed unless allowed), oriented, no degenerate
+  bool ok = false;  // 2-manifold (closed unless allowed), oriented, no degenerate or duplicate
+                    // triangle, not empty (unless allowed)
 
+  // The figures on one line, for a log or a test failure.
+  std::string Summary() const;
   // One line per figure, for the terminal.
   std::string ToText() const;
   // A JSON object with every field.

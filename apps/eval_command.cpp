@@ -1,5 +1,5 @@
-// `omnisculpt mesh-check`, `omnisculpt render` and `omnisculpt eval` (issue 5): thin layers
-// over apps/eval/.
+// `omnisculpt mesh-check`, `omnisculpt render` and `omnisculpt eval`: thin layers
+// over eval/.
 
 #include <spdlog/spdlog.h>
 
@@ -10,13 +10,13 @@
 #include <string>
 
 #include "apps/commands.h"
-#include "apps/eval/mesh_check.h"
-#include "apps/eval/raycast.h"
-#include "apps/eval/render.h"
-#include "apps/eval/report.h"
 #include "calib/error.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/rig_io.h"
+#include "eval/render.h"
+#include "eval/report.h"
+#include "raycast/raycast.h"
 
 namespace omni {
 namespace {

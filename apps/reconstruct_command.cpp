@@ -27,12 +27,12 @@
 #include "calib/atomic_file.h"
 #include "calib/drive.h"
 #include "calib/error.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
 #include "pipeline/reconstruction.h"
 #include "pipeline/sfm_outputs.h"
 #include "sfm/colmap_model.h"
-#include "surface/manifold_check.h"
 
 namespace omni {
 namespace {
@@ -165,7 +165,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
     queue_ms.push_back(row.queue_ms);
   }
   const SfmStats& stats = outputs.stats;
-  const ManifoldReport manifold = CheckManifold(result.mesh);
+  const MeshCheckReport manifold = CheckMesh(result.mesh);
   // A usable result: a usable SfM map and a surface with triangles.
   std::string failure;
   if (sfm.outcome != SfmOutcome::kUsable)
@@ -187,7 +187,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       {"keyframes", sfm.keyframes.size()},
       {"points", outputs.cloud.points.size()},
       {"triangles", result.mesh.triangles.size()},
-      {"manifold", manifold.IsOrientedManifold()},
+      {"manifold", manifold.ok},
       {"seconds", result.seconds},
       {"frames_per_second", frames_per_second},
       {"sfm_seconds", sfm.seconds},
@@ -251,14 +251,14 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       "  wrote %s (%s)\n",
       sfm.frames_total, sfm.skipped.size(), stats.frames_not_tracked, result.seconds,
       frames_per_second, sfm.keyframes.size(), outputs.cloud.points.size(),
-      result.mesh.triangles.size(), manifold.IsOrientedManifold() ? "yes" : "NO",
+      result.mesh.triangles.size(), manifold.ok ? "yes" : "NO",
       failure.empty() ? "" : "; NOT USABLE", Quantile(surface_ms, 0.5), Quantile(surface_ms, 0.95),
       result.queue_max_size, o.pipeline.queue_capacity, result.queue_blocked_seconds,
       sfm.loop_closures.size(), result.replay_seconds, out.c_str(), written.c_str());
   if (!failure.empty()) {
     ReportNotUsable(drive.folder().string() + ": " + failure + "; " + out.string() + "/" +
                     kSummaryFile + " and stats/sfm_frames.csv say what happened");
-  } else if (!manifold.IsOrientedManifold()) {
+  } else if (!manifold.ok) {
     spdlog::error("reconstruct: the surface is not an oriented 2-manifold: {}", manifold.Summary());
     CommandExitCode() = kExitCheckFailed;
   }

@@ -17,9 +17,9 @@
 #include "apps/surface/gt_keyframes.h"
 #include "calib/atomic_file.h"
 #include "calib/error.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
-#include "surface/manifold_check.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -131,21 +131,21 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       "surface: points filtered (paper §5.1): %zu invalid, %zu below the ground, %zu too far, "
       "%zu narrow aperture\n",
       filtered[0], filtered[1], filtered[2], filtered[3]);
-  const ManifoldReport report = CheckManifold(mesh);
+  const MeshCheckReport report = CheckMesh(mesh);
   std::printf(
       "surface: %zu keyframes, %zu points added, %zu rejected (%.2f%%), %zu triangles, "
       "manifold %s\n"
       "  ms per incremental keyframe: median %.1f, p95 %.1f, max %.1f; max |E| %zu\n"
       "  wrote %s and %s\n",
       stream.size(), added, rejected, 100.0 * rejected / std::max<size_t>(1, added + rejected),
-      mesh.triangles.size(), report.IsOrientedManifold() ? "yes" : "NO", Quantile(ms, 0.5),
+      mesh.triangles.size(), report.ok ? "yes" : "NO", Quantile(ms, 0.5),
       Quantile(ms, 0.95), ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()), max_e,
       (out / "surface.ply").c_str(), (out / "stats" / "keyframes.csv").c_str());
   if (mesh.triangles.empty()) {
     ReportNotUsable((o.colmap.empty() ? o.from_gt : o.colmap) + ": the surface is empty (" +
                     std::to_string(stream.size()) + " keyframes, " + std::to_string(added) +
                     " points added)");
-  } else if (!report.IsOrientedManifold()) {
+  } else if (!report.ok) {
     spdlog::error("surface: the output is not an oriented 2-manifold: {}", report.Summary());
     CommandExitCode() = kExitCheckFailed;
   }

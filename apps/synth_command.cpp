@@ -1,4 +1,4 @@
-// `omnisculpt synth`: a synthetic city drive with exact ground truth (issue 4).
+// `omnisculpt synth`: a synthetic city drive with exact ground truth.
 
 #include <spdlog/spdlog.h>
 
@@ -9,10 +9,10 @@
 
 #include "apps/commands.h"
 #include "apps/default_rig.h"
-#include "apps/synth/drive_writer.h"
-#include "apps/synth/synth_options.h"
 #include "calib/error.h"
 #include "calib/rig_io.h"
+#include "synth/drive_writer.h"
+#include "synth/synth_options.h"
 
 namespace omni {
 namespace {

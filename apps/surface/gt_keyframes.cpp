@@ -11,11 +11,11 @@
 #include <stdexcept>
 #include <unordered_map>
 
-#include "apps/eval/raycast.h"
 #include "calib/drive.h"
 #include "calib/error.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
+#include "raycast/raycast.h"
 
 namespace omni {
 namespace {

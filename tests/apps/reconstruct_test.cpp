@@ -17,10 +17,10 @@
 #include <sstream>
 #include <thread>
 
-#include "apps/eval/mesh_check.h"
-#include "apps/eval/pose_eval.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
+#include "eval/pose_eval.h"
 #include "surface/sculptor.h"
 #include "tests/apps/point_colors_check.h"
 #include "tests/apps/run_omnisculpt.h"
@@ -107,7 +107,7 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
   ASSERT_EQ(result.exit_code, 0) << result.err;
   EXPECT_FALSE(fs::exists(fs::path(out.string() + ".incomplete")));
   EXPECT_FALSE(fs::exists(out / "INCOMPLETE"));
-  // Every output of DESIGN.md §4 that the pipeline writes.
+  // Every output of a drive folder's reconstruction (docs/design.md §4) that the pipeline writes.
   for (const char* file :
        {"poses.tum", "points.ply", "surface.ply", "reconstruct.json", "stats/keyframes.csv",
         "stats/sfm_frames.csv", "sparse/cameras.txt", "sparse/images.txt", "sparse/points3D.txt"})

@@ -1,4 +1,4 @@
-// `omnisculpt sfm` (issue 8) end to end on the short synthetic drive (fixture short_drive):
+// `omnisculpt sfm` end to end on the short synthetic drive (fixture short_drive):
 // every frame tracked, the keyframe trajectory within 1 % of the distance driven after
 // similarity registration to the ground truth, the points on the ground-truth surface, the
 // outputs present, and the COLMAP text model read back by apps/surface/colmap_keyframes; bad
@@ -14,12 +14,12 @@
 #include <string>
 #include <vector>
 
-#include "apps/eval/pose_eval.h"
-#include "apps/eval/raycast.h"
 #include "apps/surface/colmap_keyframes.h"
 #include "calib/ply.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
+#include "eval/pose_eval.h"
+#include "raycast/raycast.h"
 #include "tests/apps/point_colors_check.h"
 #include "tests/apps/run_omnisculpt.h"
 #include "tests/apps/short_drive.h"

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "apps/eval/pose_eval.h"
+#include "eval/pose_eval.h"
 #include "calib/tum.h"
 #include "tests/apps/run_omnisculpt.h"
 

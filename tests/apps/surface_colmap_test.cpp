@@ -1,4 +1,4 @@
-// `omnisculpt surface --colmap` (issue 6): a COLMAP text model written by hand (a rig of two
+// `omnisculpt surface --colmap`: a COLMAP text model written by hand (a rig of two
 // cameras driving through a closed room, points on its walls) is grouped into one keyframe per
 // rig frame, its tracks become rays, and the command sculpts a closed oriented 2-manifold.
 
@@ -17,9 +17,9 @@
 #include <string>
 #include <vector>
 
-#include "apps/eval/mesh_check.h"
 #include "apps/surface/colmap_keyframes.h"
 #include "calib/error.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 
 namespace omni {

@@ -1,5 +1,5 @@
-// `omnisculpt surface --from-gt` (issue 6) end to end on a short tiny synthetic drive: the
-// surface is a closed oriented 2-manifold by the independent mesh checker of apps/eval,
+// `omnisculpt surface --from-gt` end to end on a short tiny synthetic drive: the
+// surface is a closed oriented 2-manifold by the independent mesh checker of calib/,
 // stats/keyframes.csv has one row per keyframe with the documented columns, few points are
 // rejected, and a missing drive is one error line with exit code 2.
 
@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "apps/eval/mesh_check.h"
+#include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
 #include "tests/apps/run_omnisculpt.h"
@@ -51,7 +51,7 @@ class SurfaceCommandTest : public ::testing::Test {
 };
 testing::TempDir* SurfaceCommandTest::dir_ = nullptr;
 
-// The columns of stats/keyframes.csv documented in issue 6 and DESIGN.md §5.
+// The columns of stats/keyframes.csv documented in docs/design.md §5.
 const char* const kColumns =
     "keyframe,batch,points_in,points_filtered,points_added,points_rejected,points_duplicate,"
     "steiner_added,rays_new,rays_old,cells_e,cells_n,o_left_in_e,cells_t,cells_f,cells_o,"
@@ -168,7 +168,7 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
   EXPECT_LT(rejected_share, 0.05);
 }
 
-// Step 6 (issue 7): --no-genus-refinement and --no-smoothing switch each part off on the same
+// Step 6: --no-genus-refinement and --no-smoothing switch each part off on the same
 // stream. Smoothing moves vertices only (same triangles, same vertex count); without refinement
 // no group is added and F ∩ E outside O is left as step 5 made it; each output is a closed
 // oriented 2-manifold.

@@ -1,4 +1,4 @@
-// --from-gt's corner mode (apps/surface/gt_keyframes.h, issue 6): on a tiny synthetic drive with
+// --from-gt's corner mode (apps/surface/gt_keyframes.h): on a tiny synthetic drive with
 // images, the points of a keyframe lie on the ground-truth mesh, project within a pixel of a
 // Harris corner detected (independently, here) in one of the keyframe's images, number as many
 // as asked, keep the rules of the simulated SfM (rays from earlier keyframes, no two points of
@@ -11,14 +11,14 @@
 #include <opencv2/core.hpp>
 
 #include "apps/default_rig.h"
-#include "apps/eval/raycast.h"
 #include "apps/surface/gt_keyframes.h"
-#include "apps/synth/drive_writer.h"
-#include "apps/synth/synth_options.h"
 #include "calib/drive.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
+#include "raycast/raycast.h"
 #include "sfm/harris.h"
+#include "synth/drive_writer.h"
+#include "synth/synth_options.h"
 
 namespace omni {
 namespace {

@@ -6,10 +6,10 @@
 
 #include <cmath>
 
-#include "apps/eval/mesh_check.h"
-#include "apps/eval/primitives.h"
-#include "apps/eval/raycast.h"
-#include "apps/eval/surface_eval.h"
+#include "calib/mesh_check.h"
+#include "eval/primitives.h"
+#include "eval/surface_eval.h"
+#include "raycast/raycast.h"
 
 namespace omni {
 namespace {

@@ -26,11 +26,11 @@
 #include <vector>
 
 #include "apps/default_rig.h"
-#include "apps/synth/drive_writer.h"
-#include "apps/synth/synth_options.h"
 #include "calib/drive.h"
 #include "pipeline/sfm_runner.h"
 #include "sfm/track_builder.h"
+#include "synth/drive_writer.h"
+#include "synth/synth_options.h"
 
 namespace omni {
 namespace {

@@ -16,7 +16,7 @@
 #include <string>
 
 #include "apps/surface/gt_keyframes.h"
-#include "surface/manifold_check.h"
+#include "calib/mesh_check.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -143,7 +143,7 @@ void BM_Sculpt(benchmark::State& state) {
       std::fclose(f);
     }
   }
-  state.counters["manifold"] = CheckManifold(mesh).IsOrientedManifold() ? 1 : 0;
+  state.counters["manifold"] = CheckMesh(mesh).ok ? 1 : 0;
   state.SetLabel(description + ", " + std::to_string(stream.size()) +
                  " keyframes, E=" + (state.range(0) == 0 ? "ball" : "conflict zones"));
 }

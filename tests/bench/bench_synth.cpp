@@ -7,8 +7,8 @@
 #include <memory>
 
 #include "apps/default_rig.h"
-#include "apps/synth/drive_writer.h"
-#include "apps/synth/renderer.h"
+#include "synth/drive_writer.h"
+#include "synth/renderer.h"
 
 namespace omni::synth {
 namespace {

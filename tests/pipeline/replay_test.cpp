@@ -6,8 +6,8 @@
 
 #include <Eigen/Geometry>
 
+#include "calib/mesh_check.h"
 #include "pipeline/reconstruction.h"
-#include "surface/manifold_check.h"
 #include "surface/sculptor.h"
 #include "tests/surface/step6_scenes.h"
 
@@ -107,8 +107,8 @@ TEST(PipelineReplay, ABatchReplayKeepsTheFirstScaleAndGivesAManifold) {
     EXPECT_EQ(batch.rows[r].keyframe, KeyframeId(static_cast<uint32_t>(kFirst + r - 1)));
   }
   EXPECT_TRUE(batch.invariants.empty()) << batch.invariants;
-  const ManifoldReport report = CheckManifold(batch.mesh);
-  EXPECT_TRUE(report.IsOrientedManifold()) << report.Summary();
+  const MeshCheckReport report = CheckMesh(batch.mesh);
+  EXPECT_TRUE(report.ok) << report.Summary();
   EXPECT_GT(batch.mesh.triangles.size(), 500u);
   EXPECT_EQ(batch.mesh.triangles.size(), batch.rows.back().triangles);
 
@@ -119,7 +119,7 @@ TEST(PipelineReplay, ABatchReplayKeepsTheFirstScaleAndGivesAManifold) {
   EXPECT_NEAR(incremental.scale, kCorrectionScale, 1e-9);
   EXPECT_EQ(incremental.rows.size(), 1 + kKeyframes - 10u);
   EXPECT_TRUE(incremental.invariants.empty()) << incremental.invariants;
-  EXPECT_TRUE(CheckManifold(incremental.mesh).IsOrientedManifold());
+  EXPECT_TRUE(CheckMesh(incremental.mesh).ok);
 }
 
 }  // namespace

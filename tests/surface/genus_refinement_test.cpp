@@ -9,12 +9,20 @@
 
 #include <random>
 
-#include "surface/manifold_check.h"
+#include "calib/mesh_check.h"
 #include "surface/sculptor.h"
 #include "tests/surface/step6_scenes.h"
 
 namespace omni {
 namespace {
+
+// δO may be empty before the first cell is carved: an empty surface passes the check.
+MeshCheckOptions EmptyAllowed() {
+  MeshCheckOptions options;
+  options.allow_empty = true;
+  return options;
+}
+const MeshCheckOptions kEmptyAllowed = EmptyAllowed();
 
 struct Tunnel {
   DelaunayMesh mesh;
@@ -81,18 +89,18 @@ TEST(GenusRefinement, OpensAFalseBridgeAcrossATunnelLoop) {
   ASSERT_EQ(free_cells, t.tunnel.size());
   for (const CellKey& c : t.slab) ASSERT_FALSE(t.mesh.InO(c));
 
-  const ManifoldReport before = CheckManifold(t.mesh.ExtractSurface());
-  ASSERT_TRUE(before.IsOrientedManifold()) << before.Summary();
-  ASSERT_EQ(before.components, 1u);
+  const MeshCheckReport before = CheckMesh(t.mesh.ExtractSurface());
+  ASSERT_TRUE(before.ok) << before.Summary();
+  ASSERT_EQ(before.components, 1);
   ASSERT_EQ(before.euler_characteristic, 2);  // a sphere: the growing cannot close the loop
   const size_t o_before = t.mesh.NumInO();
 
   GenusRefinementOptions options;
   options.max_group_cells = 64;
   const GenusRefinementStats stats = RefineGenus(t.mesh, options);
-  const ManifoldReport after = CheckManifold(t.mesh.ExtractSurface());
-  EXPECT_TRUE(after.IsOrientedManifold()) << after.Summary();
-  EXPECT_EQ(after.components, 1u);
+  const MeshCheckReport after = CheckMesh(t.mesh.ExtractSurface());
+  EXPECT_TRUE(after.ok) << after.Summary();
+  EXPECT_EQ(after.components, 1);
   EXPECT_EQ(after.euler_characteristic, 0) << "a torus: genus 1";
   EXPECT_EQ(stats.euler_change, after.euler_characteristic - before.euler_characteristic);
   EXPECT_GE(stats.groups, 1u);
@@ -122,8 +130,8 @@ TEST(GenusRefinement, SwitchedOffOrWithoutGroupsItKeepsTheSphere) {
   singles.edge_stars = false;
   singles.max_group_cells = 0;
   RefineGenus(t.mesh, singles);
-  const ManifoldReport report = CheckManifold(t.mesh.ExtractSurface());
-  EXPECT_TRUE(report.IsOrientedManifold()) << report.Summary();
+  const MeshCheckReport report = CheckMesh(t.mesh.ExtractSurface());
+  EXPECT_TRUE(report.ok) << report.Summary();
   EXPECT_EQ(report.euler_characteristic, 2);
 }
 
@@ -153,10 +161,9 @@ TEST(GenusRefinement, StreetStaysManifoldAfterEveryKeyframe) {
       groups += st.genus_groups;
       const std::string problems = sculptor.CheckInvariants(false);
       EXPECT_TRUE(problems.empty()) << "keyframe " << st.keyframe.value << ": " << problems;
-      const ManifoldReport report = CheckManifold(sculptor.ExtractMesh());
-      EXPECT_TRUE(report.IsOrientedManifold())
-          << "keyframe " << st.keyframe.value << ": " << report.Summary();
-      EXPECT_EQ(report.triangles, st.triangles);
+      const MeshCheckReport report = CheckMesh(sculptor.ExtractMesh(), kEmptyAllowed);
+      EXPECT_TRUE(report.ok) << "keyframe " << st.keyframe.value << ": " << report.Summary();
+      EXPECT_EQ(static_cast<size_t>(report.triangles), st.triangles);
       ++checked;
     }
   }

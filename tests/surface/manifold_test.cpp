@@ -1,5 +1,5 @@
 // The manifold tests of paper §3.1 (subtraction, addition, general) on triangulations of
-// random points, checked against each other and against the independent CheckManifold.
+// random points, checked against each other and against the independent CheckMesh.
 
 #include <gtest/gtest.h>
 
@@ -7,8 +7,8 @@
 #include <map>
 #include <random>
 
+#include "calib/mesh_check.h"
 #include "surface/delaunay.h"
-#include "surface/manifold_check.h"
 
 namespace omni {
 namespace {
@@ -25,27 +25,27 @@ TEST(ManifoldCheck, TetrahedronIsAnOrientedSphereAndTwoSharingAVertexIsNot) {
   TriangleMesh tet;
   tet.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
-  ManifoldReport r = CheckManifold(tet);
-  EXPECT_TRUE(r.IsOrientedManifold()) << r.Summary();
+  MeshCheckReport r = CheckMesh(tet);
+  EXPECT_TRUE(r.ok) << r.Summary();
   EXPECT_EQ(r.euler_characteristic, 2);
   tet.triangles[3] = {1, 3, 2};  // flipped
-  r = CheckManifold(tet);
-  EXPECT_TRUE(r.IsManifold());
-  EXPECT_FALSE(r.IsOrientedManifold());
+  r = CheckMesh(tet);
+  EXPECT_TRUE(r.closed_manifold);
+  EXPECT_FALSE(r.ok);
   // Two tetrahedra glued at one vertex: the vertex link is two cycles.
   TriangleMesh two;
   two.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
   two.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3},
                    {0, 4, 5}, {0, 6, 4}, {0, 5, 6}, {4, 6, 5}};
-  r = CheckManifold(two);
-  EXPECT_EQ(r.edges_not_in_two, 0u);
-  EXPECT_EQ(r.vertices_not_one_cycle, 1u);
-  EXPECT_FALSE(r.IsManifold());
+  r = CheckMesh(two);
+  EXPECT_EQ(r.boundary_edges + r.nonmanifold_edges, 0);
+  EXPECT_EQ(r.vertices_link_not_cycle, 1);
+  EXPECT_FALSE(r.closed_manifold);
   // An open triangle.
   TriangleMesh open;
   open.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
   open.triangles = {{0, 1, 2}};
-  EXPECT_FALSE(CheckManifold(open).IsManifold());
+  EXPECT_FALSE(CheckMesh(open).closed_manifold);
 }
 
 // Random walk on O: toggle random cells near δO; after each toggle the single-cell test's
@@ -74,13 +74,15 @@ TEST(ManifoldTests, SingleCellTestsAgreeWithGeneralTestAndIndependentCheck) {
     mesh.SetInO(c, !was_in);
     bool general = true;
     for (int v : c) general = general && mesh.GeneralTest(v);
-    const ManifoldReport report = CheckManifold(mesh.ExtractSurface());
+    MeshCheckOptions empty_allowed;  // a toggle may leave no surface at all
+    empty_allowed.allow_empty = true;
+    const MeshCheckReport report = CheckMesh(mesh.ExtractSurface(), empty_allowed);
     // The surface was a manifold before the toggle, so the general test at the cell's vertices
     // decides whether it still is.
-    EXPECT_EQ(general, report.IsOrientedManifold()) << report.Summary();
+    EXPECT_EQ(general, report.ok) << report.Summary();
     // The single-cell test accepts exactly the toggles that keep the manifold here.
     EXPECT_EQ(single, general) << "counts " << counts.vertices << counts.edges << counts.triangles;
-    EXPECT_EQ(mesh.NumSurfaceTriangles(), report.triangles);
+    EXPECT_EQ(mesh.NumSurfaceTriangles(), static_cast<size_t>(report.triangles));
     if (single) {
       EXPECT_TRUE(general) << "allowed counts " << counts.vertices << counts.edges
                            << counts.triangles << " broke the manifold";

@@ -12,7 +12,7 @@
 #include <iostream>
 #include <numeric>
 
-#include "surface/manifold_check.h"
+#include "calib/mesh_check.h"
 #include "surface/sculptor.h"
 #include "tests/surface/step6_scenes.h"
 
@@ -124,7 +124,8 @@ void ExpectSameTrianglesNoFlipNoIntersection(const SculptRun& run) {
   EXPECT_EQ(flipped, 0u);
   EXPECT_EQ(CountIntersectingPairs(run.plain), 0u);  // the checker sees the Delaunay surface clean
   EXPECT_EQ(CountIntersectingPairs(run.smoothed), 0u);
-  EXPECT_TRUE(CheckManifold(run.smoothed).IsOrientedManifold());
+  const MeshCheckReport check = CheckMesh(run.smoothed);
+  EXPECT_TRUE(check.ok) << check.Summary();
 }
 
 TEST(Smoothing, NoisyStreetWallsAndGroundGetCloserToTheTruth) {
@@ -234,7 +235,10 @@ void ExpectFastChecksMatchReference(const std::vector<SurfaceKeyframe>& drive, d
     const TriangleMesh smoothed = a.ExtractMesh();
     ASSERT_EQ(smoothed.triangles, t.ExtractSurface().triangles);
     EXPECT_EQ(CountIntersectingPairs(smoothed), 0u);
-    EXPECT_TRUE(CheckManifold(smoothed).IsOrientedManifold());
+    MeshCheckOptions empty_allowed;  // δO is still empty after the first keyframes
+    empty_allowed.allow_empty = true;
+    const MeshCheckReport check = CheckMesh(smoothed, empty_allowed);
+    EXPECT_TRUE(check.ok) << check.Summary();
     if (::testing::Test::HasFailure()) return;
   }
   EXPECT_GT(keyframes, 5u);

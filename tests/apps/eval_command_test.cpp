@@ -1,0 +1,78 @@
+// End-to-end: `omnisculpt eval`, `mesh-check` and `render` on small hand-made drives.
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "calib/ply.h"
+#include "eval/primitives.h"
+#include "tests/eval/eval_drive.h"
+
+namespace omni {
+namespace {
+namespace fs = std::filesystem;
+using testing::EvalTest;
+using testing::kEstimatedFromGt;
+
+// The command line.
+int RunOmnisculpt(const std::string& arguments, std::string* output = nullptr) {
+  const std::string command = std::string(OMNI_EXECUTABLE) + " " + arguments + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  std::string text;
+  char buffer[4096];
+  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) text.append(buffer, n);
+  const int status = pclose(pipe);
+  if (output) *output = text;
+  return WEXITSTATUS(status);
+}
+
+TEST_F(EvalTest, CommandLine) {
+  std::string output;
+  WritePlyMesh(MakeTorus(3, 1, 16, 8), root_ / "torus.ply");
+  EXPECT_EQ(RunOmnisculpt("mesh-check " + (root_ / "torus.ply").string(), &output), 0) << output;
+  EXPECT_NE(output.find("genus 1"), std::string::npos) << output;
+  TriangleMesh cubes = MakeBox({0, 0, 0}, {1, 1, 1});
+  AppendMesh(MakeBox({1, 1, 1}, {2, 2, 2}), &cubes);
+  WritePlyMesh(WeldVertices(cubes), root_ / "cubes.ply");
+  EXPECT_EQ(RunOmnisculpt("mesh-check --json " + (root_ / "cubes.ply").string(), &output), 1)
+      << output;
+  EXPECT_NE(output.find("\"nonmanifold_vertices\": 1"), std::string::npos) << output;
+  EXPECT_EQ(RunOmnisculpt("mesh-check " + (root_ / "missing.ply").string(), &output), 2) << output;
+
+  EXPECT_EQ(RunOmnisculpt("render " + (drive_ / "gt" / "mesh.ply").string() +
+                              " --bird --width 64 --out " + (root_ / "bird.png").string(),
+                          &output),
+            0)
+      << output;
+  EXPECT_TRUE(fs::exists(root_ / "bird.png"));
+  EXPECT_EQ(RunOmnisculpt("render " + (drive_ / "gt" / "mesh.ply").string() +
+                              " --pose '5 0 2 0 0 0 1' --rig " + (drive_ / "rig.json").string() +
+                              " --camera cam1 --width 24 --out " + (root_ / "view.png").string(),
+                          &output),
+            0)
+      << output;
+  EXPECT_TRUE(fs::exists(root_ / "view.png"));
+  EXPECT_EQ(
+      RunOmnisculpt("render " + (drive_ / "gt" / "mesh.ply").string() + " --out x.png", &output),
+      2);
+
+  WriteReconstruction(kEstimatedFromGt, gt_mesh_);
+  EXPECT_EQ(RunOmnisculpt("eval --gt " + drive_.string() + " --rec " + rec_.string() +
+                              " --pixels 5000 --samples 5000 --no-plots --no-renders",
+                          &output),
+            0)
+      << output;
+  EXPECT_TRUE(fs::exists(rec_ / "report" / "eval.json"));
+  EXPECT_NE(output.find("pose registration RMS 0.0 cm over 30 keyframes"), std::string::npos)
+      << output;
+  EXPECT_EQ(RunOmnisculpt("eval --gt " + drive_.string() + " --rec " + (root_ / "nowhere").string(),
+                          &output),
+            2);
+  EXPECT_NE(output.find("poses.tum"), std::string::npos) << output;
+}
+
+}  // namespace
+}  // namespace omni

@@ -1,0 +1,283 @@
+// Synthetic city drives: determinism, exact ground truth (hits reproject to their pixel and lie
+// on gt/mesh.ply), Harris corners, loop closure.
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "calib/drive.h"
+#include "calib/error.h"
+#include "calib/ply.h"
+#include "calib/rig_io.h"
+#include "calib/tum.h"
+#include "raycast/raycast.h"
+#include "synth/drive_writer.h"
+#include "synth/renderer.h"
+
+namespace omni::synth {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The default rig of the command line (data/rigs/ladybug-like.json, compiled into the
+// executable), read from the source tree.
+Rig DefaultRig() { return ReadRigJson(fs::path(OMNI_SOURCE_DIR) / "data/rigs/ladybug-like.json"); }
+
+fs::path TempFolder(const std::string& name) {
+  const fs::path path =
+      fs::temp_directory_path() / ("omni_synth_test_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(path);
+  return path;
+}
+
+std::string ReadBytes(const fs::path& path) {
+  std::ifstream stream(path, std::ios::binary);
+  std::ostringstream bytes;
+  bytes << stream.rdbuf();
+  return bytes.str();
+}
+
+// Relative path -> bytes of every file under `folder`.
+std::map<std::string, std::string> ReadTree(const fs::path& folder) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : fs::recursive_directory_iterator(folder)) {
+    if (entry.is_regular_file()) {
+      files[fs::relative(entry.path(), folder).string()] = ReadBytes(entry.path());
+    }
+  }
+  return files;
+}
+
+// A small drive for the tests that write twice: the tiny city, few frames, half-size images.
+SynthOptions SmallOptions(uint64_t seed) {
+  SynthOptions options = SynthPresetOptions("tiny");
+  options.seed = seed;
+  options.trajectory.num_frames = 3;
+  options.render.image_scale = 0.5;
+  return options;
+}
+
+double DistanceToMesh(const TriangleMesh& mesh, const Eigen::Vector3d& p) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    const Eigen::Vector3d& a = mesh.vertices[t[0]];
+    const Eigen::Vector3d& b = mesh.vertices[t[1]];
+    const Eigen::Vector3d& c = mesh.vertices[t[2]];
+    // Cheap rejection by bounding box.
+    const Eigen::Vector3d lo = a.cwiseMin(b).cwiseMin(c), hi = a.cwiseMax(b).cwiseMax(c);
+    const double box = (lo - p).cwiseMax(p - hi).cwiseMax(0.0).norm();
+    if (box >= best) continue;
+    best = std::min(best, (ClosestPointOnTriangle(p, a, b, c) - p).norm());
+  }
+  return best;
+}
+
+// The tiny preset written once, full size, shared by the tests that only read it.
+class TinyDriveTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    folder_ = new fs::path(TempFolder("tiny"));
+    SynthWriteOptions write_options;
+    write_options.progress = false;
+    summary_ = new SynthSummary(
+        WriteSyntheticDrive(SynthPresetOptions("tiny"), DefaultRig(), *folder_, write_options));
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*folder_);
+    delete folder_;
+    delete summary_;
+  }
+  static fs::path* folder_;
+  static SynthSummary* summary_;
+};
+fs::path* TinyDriveTest::folder_ = nullptr;
+SynthSummary* TinyDriveTest::summary_ = nullptr;
+
+TEST(SynthOptionsTest, PresetsAreValidAndUnknownOnesListThem) {
+  for (const SynthPreset& preset : SynthPresets()) {
+    const SynthOptions options = SynthPresetOptions(preset.name);
+    EXPECT_EQ(options.Check(), "") << preset.name;
+    EXPECT_EQ(options.preset, preset.name);
+  }
+  try {
+    SynthPresetOptions("huge");
+    FAIL() << "no error for an unknown preset";
+  } catch (const InputError& error) {
+    const std::string what = error.what();
+    EXPECT_NE(what.find("huge"), std::string::npos) << what;
+    EXPECT_NE(what.find("tiny, demo, paper"), std::string::npos) << what;
+  }
+  SynthOptions bad = SynthPresetOptions("tiny");
+  bad.render.supersampling = 0;
+  bad.trajectory.num_frames = 1;
+  EXPECT_NE(bad.Check().find("render.supersampling"), std::string::npos);
+  EXPECT_NE(bad.Check().find("trajectory.num_frames"), std::string::npos);
+  EXPECT_THROW(MakeSyntheticDrive(bad, DefaultRig()), InputError);
+}
+
+TEST(SynthPresetTest, LoopLengthsAndSpacingFollowTheIssue) {
+  // paper: ~600 m closed loop, ~1550 frames, ~0.4 m apart; demo: 150-200 m, ~400 frames.
+  const SyntheticDrive paper = MakeSyntheticDrive(SynthPresetOptions("paper"), DefaultRig());
+  EXPECT_NEAR(paper.trajectory.path.Length(), 600.0, 60.0);
+  EXPECT_NEAR(paper.NumFrames(), 1550u, 50u);
+  EXPECT_NEAR(paper.trajectory.driven_length / paper.NumFrames(), 0.4, 0.06);
+  const SyntheticDrive demo = MakeSyntheticDrive(SynthPresetOptions("demo"), DefaultRig());
+  EXPECT_GE(demo.trajectory.path.Length(), 150.0);
+  EXPECT_LE(demo.trajectory.path.Length(), 200.0);
+  EXPECT_NEAR(demo.NumFrames(), 400u, 20u);
+  EXPECT_GT(demo.scene.mesh.triangles.size(), 10000u);
+}
+
+TEST(SynthDriveTest, SameSeedSameBytesOtherSeedOtherBytes) {
+  SynthWriteOptions write_options;
+  write_options.progress = false;
+  const fs::path a = TempFolder("seed_a"), b = TempFolder("seed_b"), c = TempFolder("seed_c");
+  WriteSyntheticDrive(SmallOptions(7), DefaultRig(), a, write_options);
+  WriteSyntheticDrive(SmallOptions(7), DefaultRig(), b, write_options);
+  WriteSyntheticDrive(SmallOptions(8), DefaultRig(), c, write_options);
+  const auto files_a = ReadTree(a), files_b = ReadTree(b), files_c = ReadTree(c);
+  // rig.json, 6 x 3 images, poses, mesh, scene.
+  EXPECT_EQ(files_a.size(), 1u + 6u * 3u + 3u);
+  ASSERT_EQ(files_a.size(), files_b.size());
+  for (const auto& [name, bytes] : files_a) {
+    ASSERT_TRUE(files_b.count(name)) << name;
+    EXPECT_TRUE(bytes == files_b.at(name)) << name << " differs between two runs";
+  }
+  EXPECT_FALSE(files_a.at("gt/mesh.ply") == files_c.at("gt/mesh.ply"));
+  EXPECT_FALSE(files_a.at("images/cam0/000001.png") == files_c.at("images/cam0/000001.png"));
+  EXPECT_FALSE(fs::exists(a.string() + ".partial"));
+  // The written rig is the one rendered (scaled), and reads back.
+  const Rig rig = ReadRigJson(a / "rig.json");
+  EXPECT_EQ(rig.cameras.at(0).width, 192);
+  EXPECT_EQ(cv::imread((a / "images/cam3/000002.png").string(), cv::IMREAD_UNCHANGED).cols, 192);
+  for (const fs::path& folder : {a, b, c}) fs::remove_all(folder);
+}
+
+TEST(SynthDriveTest, RefusesNonEmptyOutputUnlessForcedAndReplacesAtTheEnd) {
+  SynthWriteOptions write_options;
+  write_options.progress = false;
+  const fs::path out = TempFolder("force");
+  fs::create_directories(out);
+  std::ofstream(out / "keep.txt") << "old";
+  EXPECT_THROW(WriteSyntheticDrive(SmallOptions(3), DefaultRig(), out, write_options), InputError);
+  EXPECT_TRUE(fs::exists(out / "keep.txt"));
+  write_options.force = true;
+  WriteSyntheticDrive(SmallOptions(3), DefaultRig(), out, write_options);
+  EXPECT_FALSE(fs::exists(out / "keep.txt"));
+  EXPECT_TRUE(fs::exists(out / "gt" / "scene.json"));
+  EXPECT_FALSE(fs::exists(out.string() + ".partial"));
+  EXPECT_FALSE(fs::exists(out.string() + ".old"));
+  fs::remove_all(out);
+}
+
+TEST_F(TinyDriveTest, HitsReprojectToTheirPixelAndLieOnTheWrittenMesh) {
+  const SyntheticDrive drive = MakeSyntheticDrive(SynthPresetOptions("tiny"), DefaultRig());
+  const SceneRenderer renderer(drive.scene, drive.options.seed, drive.options.render);
+  const TriangleMesh mesh = ReadPlyMesh(*folder_ / "gt" / "mesh.ply");
+  ASSERT_EQ(mesh.triangles.size(), drive.scene.mesh.triangles.size());
+  ASSERT_EQ(summary_->triangles, mesh.triangles.size());
+  std::mt19937 rng(12345);
+  int hits = 0, facing = 0, samples = 0;
+  double worst_reprojection = 0, worst_distance = 0;
+  for (int i = 0; i < 300; ++i) {
+    const size_t frame = rng() % drive.NumFrames();
+    const size_t camera_index = rng() % 5;  // side cameras: mostly hits
+    const Camera& camera = drive.rig.cameras[camera_index];
+    const Eigen::Vector2d pixel(
+        std::uniform_real_distribution<double>(-0.5, camera.width - 0.5)(rng),
+        std::uniform_real_distribution<double>(-0.5, camera.height - 0.5)(rng));
+    const Rigid3d world_from_cam = drive.WorldFromCamera(frame, camera_index);
+    ++samples;
+    const auto hit = renderer.CastPixel(camera, world_from_cam, pixel);
+    if (!hit) continue;
+    ++hits;
+    Eigen::Vector2d reprojected;
+    ASSERT_TRUE(camera.Project(world_from_cam.Inverse() * hit->point, &reprojected));
+    worst_reprojection = std::max(worst_reprojection, (reprojected - pixel).norm());
+    if (i < 120) worst_distance = std::max(worst_distance, DistanceToMesh(mesh, hit->point));
+    // Triangles face the free space the camera sees from.
+    if (drive.scene.normals[hit->triangle].dot(hit->point - world_from_cam.translation) < 0) {
+      ++facing;
+    }
+  }
+  EXPECT_GT(hits, samples / 2);
+  EXPECT_LT(worst_reprojection, 0.01);
+  EXPECT_LT(worst_distance, 1e-4);
+  EXPECT_GE(facing, hits * 99 / 100);
+}
+
+TEST_F(TinyDriveTest, SideImagesHaveManyHarrisCorners) {
+  // "Default settings" of OpenCV's Harris: cv::goodFeaturesToTrack with useHarrisDetector=true,
+  // k = 0.04, blockSize 3, qualityLevel 0.01, minDistance 1, no mask, maxCorners 100000.
+  const Drive drive_folder = Drive::Open(*folder_);
+  ASSERT_EQ(drive_folder.NumFrames(), 30u);
+  int images = 0, rich = 0;
+  for (size_t frame = 0; frame < drive_folder.NumFrames(); ++frame) {
+    for (size_t camera = 0; camera < 5; ++camera) {
+      const cv::Mat image = drive_folder.LoadGray(frame, camera);
+      std::vector<cv::Point2f> corners;
+      cv::goodFeaturesToTrack(image, corners, 100000, 0.01, 1.0, cv::noArray(), 3, true, 0.04);
+      ++images;
+      if (corners.size() > 300) ++rich;
+    }
+  }
+  EXPECT_GE(rich * 100, images * 95) << rich << " of " << images << " images";
+}
+
+TEST_F(TinyDriveTest, PosesAreWrittenAndTheLoopCloses) {
+  const std::vector<StampedPose> poses = ReadTum(*folder_ / "gt" / "poses.tum");
+  const SyntheticDrive drive = MakeSyntheticDrive(SynthPresetOptions("tiny"), DefaultRig());
+  ASSERT_EQ(poses.size(), drive.NumFrames());
+  double spacing = 0;
+  for (size_t f = 0; f < poses.size(); ++f) {
+    EXPECT_NEAR(poses[f].timestamp, f / 15.0, 1e-9);
+    EXPECT_LT((poses[f].world_from_rig.translation - drive.trajectory.world_from_rig[f].translation)
+                  .norm(),
+              1e-6);
+    EXPECT_NEAR(poses[f].world_from_rig.translation.z(), 4.0, 0.05);  // rig ~4 m above the road
+    if (f > 0) {
+      const double step =
+          (poses[f].world_from_rig.translation - poses[f - 1].world_from_rig.translation).norm();
+      EXPECT_GT(step, 0.5);
+      spacing = std::max(spacing, step);
+    }
+  }
+  // The drive ends past its start: the last poses pass within a frame spacing of the first one
+  // and the last one is a few metres from it.
+  const Eigen::Vector3d start = poses.front().world_from_rig.translation;
+  double closest = std::numeric_limits<double>::infinity();
+  for (size_t f = poses.size() - 4; f < poses.size(); ++f) {
+    closest = std::min(closest, (poses[f].world_from_rig.translation - start).norm());
+  }
+  EXPECT_LT(closest, spacing);
+  EXPECT_LT((poses.back().world_from_rig.translation - start).norm(), 10.0);
+  EXPECT_GT(drive.trajectory.driven_length, drive.trajectory.path.Length());
+  // The path itself is closed and continuous.
+  Eigen::Vector2d p0, p1, t0, t1;
+  double k0, k1;
+  drive.trajectory.path.Evaluate(0.0, &p0, &t0, &k0);
+  drive.trajectory.path.Evaluate(drive.trajectory.path.Length() - 1e-9, &p1, &t1, &k1);
+  EXPECT_LT((p0 - p1).norm(), 1e-6);
+  EXPECT_LT((t0 - t1).norm(), 1e-6);
+  for (double s = 0; s < drive.trajectory.path.Length(); s += 0.05) {
+    drive.trajectory.path.Evaluate(s, &p0, &t0, &k0);
+    drive.trajectory.path.Evaluate(s + 0.05, &p1, &t1, &k1);
+    EXPECT_NEAR((p1 - p0).norm(), 0.05, 1e-3) << s;
+  }
+}
+
+}  // namespace
+}  // namespace omni::synth

@@ -232,6 +232,18 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
   summary["loop_closure"] = o.pipeline.sfm.loop_closure;
   summary["loop_closures"] = loops;
   summary["surface_replay_seconds"] = result.replay_seconds;
+  // The final bundle adjustment's replay is the one after the loop closures' replays.
+  const bool final_ba =
+      sfm.final_bundle_adjustment_seconds > 0.0 && sfm.final_rms_angle_after > 0.0;
+  summary["final_bundle_adjustment"] = {
+      {"ran", final_ba},
+      {"seconds", sfm.final_bundle_adjustment_seconds},
+      {"rms_angle_before_deg", sfm.final_rms_angle_before * 180.0 / M_PI},
+      {"rms_angle_after_deg", sfm.final_rms_angle_after * 180.0 / M_PI},
+      {"surface_replay_seconds",
+       final_ba && result.loop_replay_seconds.size() > sfm.loop_closures.size()
+           ? result.loop_replay_seconds.back()
+           : 0.0}};
   summary["loop_replay"] = o.loop_replay;
   summary["enclosing"] = o.enclosing;
   summary["prefetch_frames_ahead"] = o.pipeline.sfm.prefetch.frames_ahead;

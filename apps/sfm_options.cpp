@@ -31,6 +31,8 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                     "Do not detect revisits nor correct the drift");
   command->add_flag("!--no-global-ba", o->sfm.loop.global_bundle_adjustment,
                     "After a loop closure, correct with the pose graph only");
+  command->add_flag("!--no-final-ba", o->sfm.final_bundle_adjustment,
+                    "No global bundle adjustment when the drive ends");
   command
       ->add_option("--scene-depth", o->scene_depth,
                    "Typical scene depth (m), for the warning on large camera offsets in central "

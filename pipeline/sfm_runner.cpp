@@ -215,6 +215,26 @@ SfmRunResult SfmRunner::Finish() {
   s.tracker.Finish();
   s.HandOver();
   SfmRunResult& result = s.result;
+  if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {
+    const auto ba_start = Clock::now();
+    const BundleAdjustmentSummary summary = s.tracker.GlobalBundleAdjust();
+    result.final_bundle_adjustment_seconds = SecondsSince(ba_start);
+    if (summary.success) {
+      result.final_rms_angle_before = summary.rms_angle_before;
+      result.final_rms_angle_after = summary.rms_angle_after;
+      result.keyframes = s.tracker.FinalizedSnapshot();
+      for (FinalizedKeyframe& keyframe : result.keyframes)
+        keyframe.frame = s.InputFrame(keyframe.frame);
+      if (s.callbacks.map_corrected) s.callbacks.map_corrected(result.keyframes);
+      spdlog::info(
+          "sfm: final bundle adjustment of {} keyframes in {:.2f} s: RMS angle {:.4f} -> "
+          "{:.4f} degrees",
+          result.keyframes.size(), result.final_bundle_adjustment_seconds,
+          summary.rms_angle_before * 180.0 / M_PI, summary.rms_angle_after * 180.0 / M_PI);
+    } else {
+      spdlog::warn("sfm: the final bundle adjustment failed; the map is kept as it was");
+    }
+  }
   result.front = s.builder.StageTimings();
   result.back = s.tracker.StageTimings();
   result.seconds = SecondsSince(s.start);

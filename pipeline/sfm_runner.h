@@ -33,6 +33,10 @@ struct SfmRunnerOptions {
   // and global bundle adjustment); the corrected finalised keyframes are handed over again.
   bool loop_closure = true;
   LoopClosureOptions loop;
+  // When the input ends: a global bundle adjustment of every keyframe and point (the first two
+  // keyframes fixed), and the corrected map handed over again (map_corrected), as after a loop
+  // closure.
+  bool final_bundle_adjustment = true;
   int max_frames = 0;  // 0: every frame of the input
   // A run is usable when the SfM initialised and at least this share of the frames read was
   // tracked; below it the map covers too little of the drive (tracking was lost for good).
@@ -91,6 +95,10 @@ struct SfmRunResult {
   TrackBuilder::Timings front;
   Tracker::Timings back;
   double loop_closure_seconds = 0.0;
+  // The final global bundle adjustment: its time, and the RMS angle of the observations
+  // (radians) before and after it; 0 when it did not run.
+  double final_bundle_adjustment_seconds = 0.0;
+  double final_rms_angle_before = 0.0, final_rms_angle_after = 0.0;
   double seconds = 0.0;
 };
 
@@ -109,8 +117,9 @@ struct SfmRunnerCallbacks {
   // On the runner's thread, in order: a keyframe that left the local window (its pose and
   // points no longer move).
   std::function<void(const FinalizedKeyframe&)> keyframe_finalised;
-  // On the runner's thread, after a loop closure corrected the map: every keyframe finalised
-  // so far, rebuilt from the corrected map (the later keyframe_finalised calls continue it).
+  // On the runner's thread, after a loop closure or the final bundle adjustment corrected the
+  // map: every keyframe finalised so far, rebuilt from the corrected map (the later
+  // keyframe_finalised calls continue it).
   std::function<void(const std::vector<FinalizedKeyframe>&)> map_corrected;
   // On the runner's thread, after each frame (its row), with the tracker's counts.
   std::function<void(const SfmFrameRow&, int keyframes, int points)> frame_done;

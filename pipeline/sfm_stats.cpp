@@ -33,6 +33,7 @@ std::string SfmStagesCsv(const SfmStats& s) {
       {"triangulate", s.back.triangulate},
       {"bundle_adjustment", s.back.bundle_adjustment},
       {"loop_closure", s.loop_closure_seconds},
+      {"final_bundle_adjustment", s.final_bundle_adjustment_seconds},
       {"queue_wait", s.queue_wait_seconds}};
   double timed = 0.0;
   for (const auto& stage : stages) timed += stage.second;
@@ -69,6 +70,8 @@ std::string SfmSummaryCsv(const SfmStats& s) {
       << "multi_camera_points_share," << s.tracks.multi_camera_share << '\n'
       << "aperture_ok_share," << s.tracks.aperture_ok_share << '\n'
       << "frames_per_second," << s.frames / std::max(s.total_seconds, 1e-9) << '\n'
+      << "final_ba_rms_angle_before_deg," << s.final_ba_rms_angle_before_deg << '\n'
+      << "final_ba_rms_angle_after_deg," << s.final_ba_rms_angle_after_deg << '\n'
       << "usable," << s.usable << '\n';
   return csv.str();
 }

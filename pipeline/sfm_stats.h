@@ -33,11 +33,14 @@ struct SfmStats {
   // Wall seconds. Detection and matching run in parallel over the cameras.
   TrackBuilder::Timings front;
   Tracker::Timings back;
-  double load_seconds = 0.0;          // the SfM waiting for a frame's images
-  double loop_closure_seconds = 0.0;  // detection, correction, global adjustment (reconstruct)
-  double queue_wait_seconds = 0.0;    // the SfM blocked on a full surface queue (reconstruct)
-  double total_seconds = 0.0;         // the whole SfM, from the first frame to the last keyframe
-  bool usable = true;                 // the run gave a usable map (pipeline/sfm_runner.h)
+  double load_seconds = 0.0;                     // the SfM waiting for a frame's images
+  double loop_closure_seconds = 0.0;             // detection, correction, global adjustment
+  double final_bundle_adjustment_seconds = 0.0;  // when the drive ended
+  // RMS angle of the observations (degrees) before and after that adjustment; 0: it did not run.
+  double final_ba_rms_angle_before_deg = 0.0, final_ba_rms_angle_after_deg = 0.0;
+  double queue_wait_seconds = 0.0;  // the SfM blocked on a full surface queue (reconstruct)
+  double total_seconds = 0.0;       // the whole SfM, from the first frame to the last keyframe
+  bool usable = true;               // the run gave a usable map (pipeline/sfm_runner.h)
 
   void AddFrame(bool loaded, int matched, const FrameResult& result);
 };

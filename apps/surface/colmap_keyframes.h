@@ -1,6 +1,6 @@
 #pragma once
-// The keyframe stream of DESIGN.md §4 from a COLMAP text model (cameras.txt, images.txt,
-// points3D.txt), for `omnisculpt surface --colmap` (issue 6). Images whose names share a frame
+// The keyframe stream of docs/design.md §7 from a COLMAP text model (cameras.txt, images.txt,
+// points3D.txt), for `omnisculpt surface --colmap`. Images whose names share a frame
 // (the same file name in different folders, e.g. "cam0/000123.png" and "cam1/000123.png") form
 // one keyframe, a rig frame; otherwise every image is a keyframe. Keyframes are ordered by
 // frame name. A point goes to the latest keyframe of its track (paper §3.3: observed by

@@ -1,5 +1,5 @@
 #pragma once
-// A simulated perfect SfM for the surface module (issue 6): keyframes along a ground-truth
+// A simulated perfect SfM for the surface module: keyframes along a ground-truth
 // trajectory and points sampled on the visible ground-truth surface, each with its rays to the
 // earlier keyframes that see it unoccluded (paper §3.3: a point of P_t is observed by keyframes
 // t' ≤ t only). Central rig: every ray starts at the keyframe centre.
@@ -8,7 +8,7 @@
 //  - corner mode (the default when the drive has images): the rays through the Harris corners
 //    of the keyframe's images (sfm/harris.h, the SfM's detector) are cast from their camera's
 //    centre onto the mesh, so that the points favour textured corners as a Harris-based SfM's
-//    do (issue 6);
+//    do;
 //  - uniform mode (GT-only drives, or corner_points off): random directions from the keyframe
 //    centre.
 
@@ -62,7 +62,7 @@ struct GtKeyframeOptions {
 std::vector<size_t> SelectKeyframeFrames(const std::vector<Eigen::Vector3d>& centres,
                                          double spacing);
 
-// The keyframe stream of DESIGN.md §4 over `mesh` seen from `keyframe_centres` (Embree).
+// The keyframe stream of docs/design.md §7 over `mesh` seen from `keyframe_centres` (Embree).
 std::vector<SurfaceKeyframe> MakeGtKeyframes(const TriangleMesh& mesh,
                                              const std::vector<Eigen::Vector3d>& keyframe_centres,
                                              const GtKeyframeOptions& options);

@@ -1,5 +1,5 @@
 #pragma once
-// End-to-end check of the point colours of `omnisculpt sfm` / `reconstruct` (issues 8, 9): the
+// End-to-end check of the point colours of `omnisculpt sfm` / `reconstruct`: the
 // colour of each point of sparse/points3D.txt is, within rounding, the mean over its track of
 // the drive image's pixel (bilinear) at the 2-D point of sparse/images.txt, and points.ply
 // carries the same colours in the same order.

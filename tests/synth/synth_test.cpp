@@ -128,7 +128,7 @@ TEST(SynthOptionsTest, PresetsAreValidAndUnknownOnesListThem) {
   EXPECT_THROW(MakeSyntheticDrive(bad, DefaultRig()), InputError);
 }
 
-TEST(SynthPresetTest, LoopLengthsAndSpacingFollowTheIssue) {
+TEST(SynthPresetTest, LoopLengthsAndSpacingFollowThePresets) {
   // paper: ~600 m closed loop, ~1550 frames, ~0.4 m apart; demo: 150-200 m, ~400 frames.
   const SyntheticDrive paper = MakeSyntheticDrive(SynthPresetOptions("paper"), DefaultRig());
   EXPECT_NEAR(paper.trajectory.path.Length(), 600.0, 60.0);

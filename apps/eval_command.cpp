@@ -164,6 +164,11 @@ void RegisterEval(CLI::App& app) {
       ->check(CLI::PositiveNumber);
   command->add_option("--max-ray-length", options->eval.surfaces.max_ray_length,
                       "visibility reach of the drive for completeness (m)");
+  command
+      ->add_option("--pixel-thresholds", options->eval.ray_errors.pixel_thresholds,
+                   "distances (m) of the pixel precision / recall, comma-separated")
+      ->delimiter(',')
+      ->check(CLI::PositiveNumber);
   command->add_option("--seed", options->eval.ray_errors.seed, "random seed");
   command->add_flag("--by-frame-index", options->by_frame_index,
                     "match poses by frame index (timestamp = index) instead of timestamp");
@@ -189,6 +194,14 @@ void RegisterEval(CLI::App& app) {
       std::printf("F-score at %.2f m: %.3f (precision %.3f, recall %.3f)\n", pr.threshold,
                   pr.f_score, pr.precision, pr.recall);
     }
+    for (const PixelPrecisionRecall& pr : r.pixel.precision_recall) {
+      std::printf("pixel F-score at %.2f m: %.3f (precision %.3f, recall %.3f)\n", pr.threshold,
+                  pr.f_score, pr.precision, pr.recall);
+    }
+    std::printf(
+        "pixel tail above %.2f m: %.1f %% of both hits (in front %.1f %%, behind %.1f %%)\n",
+        r.pixel_tail_error, 100.0 * r.pixel.tail, 100.0 * r.pixel.tail_front,
+        100.0 * r.pixel.tail_behind);
     if (summary.pipeline.present) {
       const EvalPipeline& pipeline = summary.pipeline;
       std::printf(

@@ -43,6 +43,30 @@ nlohmann::json StatsJson(const ErrorStats& s) {
       {"count", s.count}, {"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"max", s.max}};
 }
 
+nlohmann::json PixelScoresJson(const PixelScores& p) {
+  nlohmann::json prf = nlohmann::json::array();
+  for (const PixelPrecisionRecall& x : p.precision_recall) {
+    prf.push_back({{"threshold_m", x.threshold},
+                   {"within", x.within},
+                   {"precision", x.precision},
+                   {"recall", x.recall},
+                   {"f_score", x.f_score}});
+  }
+  nlohmann::json json = {{"rays", p.rays},
+                         {"estimated_hits", p.estimated_hits},
+                         {"gt_hits", p.gt_hits},
+                         {"both_hits", p.both_hits},
+                         {"precision_recall", prf},
+                         {"tail", p.tail},
+                         {"tail_front", p.tail_front},
+                         {"tail_behind", p.tail_behind},
+                         {"tail_count", p.tail_count},
+                         {"tail_front_count", p.tail_front_count},
+                         {"tail_behind_count", p.tail_behind_count}};
+  if (!p.camera.empty()) json["camera"] = p.camera;
+  return json;
+}
+
 nlohmann::json Sim3Json(const Sim3d& s) {
   return {{"scale", s.scale},
           {"q_wxyz", {s.rotation.w(), s.rotation.x(), s.rotation.y(), s.rotation.z()}},
@@ -458,6 +482,12 @@ std::string EvalSummaryToJson(const EvalSummary& s) {
       {"share_gt_hit", r.share_gt_hit},     {"share_both_hit", r.share_both_hit},
       {"quantiles_m", quantiles},           {"share_above_6m", r.share_above_large},
       {"errors_m", StatsJson(r.errors)}};
+  json["pixel"] = PixelScoresJson(r.pixel);
+  json["pixel"]["tail_error_m"] = r.pixel_tail_error;
+  json["pixel"]["cameras"] = nlohmann::json::array();
+  for (const PixelScores& camera : r.pixel_cameras) {
+    json["pixel"]["cameras"].push_back(PixelScoresJson(camera));
+  }
   nlohmann::json prf = nlohmann::json::array();
   for (const PrecisionRecall& x : s.surfaces.precision_recall) {
     prf.push_back({{"threshold_m", x.threshold},
@@ -594,6 +624,34 @@ std::string EvalSummaryToMarkdown(const EvalSummary& s) {
     }
     md << " |\n";
   }
+
+  md << "\n## Pixel precision / recall (ray-traced)\n\n"
+     << "From the rays of the ray-traced error: a pixel is right at τ when its estimated and "
+        "ground-truth hits both exist and are less than τ apart; precision is over the pixels "
+        "with an estimated hit, recall over those with a ground-truth hit. Tail: the pixels with "
+        "both hits whose error is above "
+     << Cm(r.pixel_tail_error)
+     << " cm, split by whether the estimated hit is nearer the camera (in front) or not "
+        "(behind), as shares of the pixels with both hits.\n\n"
+     << "| camera | rays | estimated hits | ground-truth hits |";
+  for (const PixelPrecisionRecall& x : r.pixel.precision_recall) {
+    md << " P / R / F at " << Cm(x.threshold) << " cm |";
+  }
+  md << " tail | in front | behind |\n|---|---|---|---|";
+  for (size_t i = 0; i < r.pixel.precision_recall.size(); ++i) md << "---|";
+  md << "---|---|---|\n";
+  auto pixel_row = [&md](const std::string& name, const PixelScores& p) {
+    md << "| " << name << " | " << p.rays << " | " << p.estimated_hits << " | " << p.gt_hits
+       << " |";
+    for (const PixelPrecisionRecall& x : p.precision_recall) {
+      md << " " << Fixed(x.precision, 3) << " / " << Fixed(x.recall, 3) << " / "
+         << Fixed(x.f_score, 3) << " |";
+    }
+    md << " " << Fixed(100.0 * p.tail, 1) << " % | " << Fixed(100.0 * p.tail_front, 1) << " % | "
+       << Fixed(100.0 * p.tail_behind, 1) << " % |\n";
+  };
+  for (const PixelScores& camera : r.pixel_cameras) pixel_row(camera.camera, camera);
+  pixel_row("**all**", r.pixel);
   if (s.pipeline.present) {
     const EvalPipeline& pl = s.pipeline;
     md << "\n## Pipeline (reconstruct.json)\n\n"

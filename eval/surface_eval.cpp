@@ -8,6 +8,7 @@
 #include <cmath>
 #include <random>
 #include <unordered_set>
+#include <utility>
 
 #include "calib/error.h"
 
@@ -44,6 +45,53 @@ Eigen::Vector3i VoxelOf(const Eigen::Vector3d& point, double voxel) {
   return (point / voxel).array().floor().cast<int>();
 }
 
+double Ratio(long count, long of) {
+  return of > 0 ? static_cast<double>(count) / static_cast<double>(of) : 0.0;
+}
+
+// One ray's contribution to the pixel figures: its hits and, with both, the error and whether
+// the estimated hit is nearer its camera (both rays start at their camera centre, so the hit
+// distances are the distances to the centres).
+void AddPixel(bool estimated_hit, bool gt_hit, double error, bool estimate_in_front,
+              const RayErrorOptions& options, PixelScores* scores) {
+  ++scores->rays;
+  scores->estimated_hits += estimated_hit;
+  scores->gt_hits += gt_hit;
+  if (!(estimated_hit && gt_hit)) return;
+  ++scores->both_hits;
+  for (size_t t = 0; t < options.pixel_thresholds.size(); ++t) {
+    scores->precision_recall[t].within += error < options.pixel_thresholds[t];
+  }
+  if (error > options.pixel_tail_error) {
+    ++scores->tail_count;
+    ++(estimate_in_front ? scores->tail_front_count : scores->tail_behind_count);
+  }
+}
+
+void FinishPixelScores(PixelScores* scores) {
+  for (PixelPrecisionRecall& pr : scores->precision_recall) {
+    pr.precision = Ratio(pr.within, scores->estimated_hits);
+    pr.recall = Ratio(pr.within, scores->gt_hits);
+    pr.f_score = pr.precision + pr.recall > 0.0
+                     ? 2.0 * pr.precision * pr.recall / (pr.precision + pr.recall)
+                     : 0.0;
+  }
+  scores->tail = Ratio(scores->tail_count, scores->both_hits);
+  scores->tail_front = Ratio(scores->tail_front_count, scores->both_hits);
+  scores->tail_behind = Ratio(scores->tail_behind_count, scores->both_hits);
+}
+
+PixelScores EmptyPixelScores(std::string camera, const std::vector<double>& thresholds) {
+  PixelScores scores;
+  scores.camera = std::move(camera);
+  for (double threshold : thresholds) {
+    PixelPrecisionRecall pr;
+    pr.threshold = threshold;
+    scores.precision_recall.push_back(pr);
+  }
+  return scores;
+}
+
 }  // namespace
 
 std::string RayErrorOptions::Check() const {
@@ -53,6 +101,10 @@ std::string RayErrorOptions::Check() const {
   for (double q : quantile_levels) {
     if (!(q >= 0.0 && q <= 1.0)) return "quantile_levels: must be in [0, 1]";
   }
+  for (double t : pixel_thresholds) {
+    if (!(t > 0.0)) return "pixel_thresholds: must be > 0";
+  }
+  if (!(pixel_tail_error > 0.0)) return "pixel_tail_error: must be > 0";
   return {};
 }
 
@@ -145,8 +197,10 @@ RayErrorResult EvaluateRayErrors(const Rig& rig, const std::vector<KeyframePoses
   RayErrorResult result;
   result.sampled_pixels = static_cast<long>(samples.size());
   std::vector<Ray> estimated_rays, gt_rays;
+  std::vector<int> ray_cameras;
   estimated_rays.reserve(samples.size());
   gt_rays.reserve(samples.size());
+  ray_cameras.reserve(samples.size());
   for (const PixelSample& sample : samples) {
     const Camera& camera = rig.cameras[sample.camera];
     Ray estimated_ray, gt_ray;
@@ -158,24 +212,38 @@ RayErrorResult EvaluateRayErrors(const Rig& rig, const std::vector<KeyframePoses
     estimated_ray.max_distance = gt_ray.max_distance = options.max_ray_length;
     estimated_rays.push_back(estimated_ray);
     gt_rays.push_back(gt_ray);
+    ray_cameras.push_back(sample.camera);
   }
   result.rays = static_cast<long>(gt_rays.size());
   const std::vector<RayHit> estimated_hits = estimated_surface.CastMany(estimated_rays);
   const std::vector<RayHit> gt_hits = gt_surface.CastMany(gt_rays);
+  result.pixel_tail_error = options.pixel_tail_error;
+  result.pixel = EmptyPixelScores("", options.pixel_thresholds);
+  for (const Camera& camera : rig.cameras) {
+    result.pixel_cameras.push_back(EmptyPixelScores(camera.name, options.pixel_thresholds));
+  }
   std::vector<double> errors;
   for (size_t i = 0; i < gt_rays.size(); ++i) {
     const bool estimated_hit = estimated_hits[i].Hit();
     const bool gt_hit = gt_hits[i].Hit();
     result.estimated_hits += estimated_hit;
     result.gt_hits += gt_hit;
+    double error = 0.0;
     if (estimated_hit && gt_hit) {
       ++result.both_hits;
       const Eigen::Vector3d p_e =
           estimated_rays[i].origin + estimated_hits[i].distance * estimated_rays[i].direction;
       const Eigen::Vector3d p_g = gt_rays[i].origin + gt_hits[i].distance * gt_rays[i].direction;
-      errors.push_back((p_e - p_g).norm());
+      error = (p_e - p_g).norm();
+      errors.push_back(error);
     }
+    const bool in_front = estimated_hits[i].distance < gt_hits[i].distance;
+    AddPixel(estimated_hit, gt_hit, error, in_front, options, &result.pixel);
+    AddPixel(estimated_hit, gt_hit, error, in_front, options,
+             &result.pixel_cameras[ray_cameras[i]]);
   }
+  FinishPixelScores(&result.pixel);
+  for (PixelScores& scores : result.pixel_cameras) FinishPixelScores(&scores);
   if (result.rays > 0) {
     result.share_estimated_hit = static_cast<double>(result.estimated_hits) / result.rays;
     result.share_gt_hit = static_cast<double>(result.gt_hits) / result.rays;

@@ -4,6 +4,10 @@
 //   camera, the first hit of the pixel's ray from the registered estimated pose in the
 //   registered estimated surface and from the ground-truth pose in the ground-truth surface;
 //   error = distance between the hits where both exist;
+// * pixel precision / recall / F-score from the same rays: a pixel is right at τ when both hits
+//   exist and are less than τ apart; precision counts it among the pixels with an estimated
+//   hit, recall among those with a ground-truth hit; the tail (errors above a length) is split
+//   by whether the estimated hit is nearer its camera than the ground-truth hit or not;
 // * surface against surface: accuracy (estimated → GT) and completeness (GT → estimated, over
 //   the part of the GT surface the drive saw) on uniform area samples, precision / recall /
 //   F-score at given distances;
@@ -32,8 +36,32 @@ struct RayErrorOptions {
   double max_ray_length = std::numeric_limits<double>::infinity();
   std::vector<double> quantile_levels = {0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9};
   double large_error = 6.0;  // paper §5.2: share of errors above 600 cm
+  // Pixel precision / recall / F-score at these distances (metres).
+  std::vector<double> pixel_thresholds = {0.2, 0.5};
+  double pixel_tail_error = 1.0;  // the tail: both-hit pixels whose error is above this
 
   std::string Check() const;
+};
+
+// Pixel precision / recall at one distance.
+struct PixelPrecisionRecall {
+  double threshold = 0.0;
+  long within = 0;         // pixels with both hits less than threshold apart
+  double precision = 0.0;  // within / estimated_hits (0 without an estimated hit)
+  double recall = 0.0;     // within / gt_hits (0 without a ground-truth hit)
+  double f_score = 0.0;    // harmonic mean (0 when both are 0)
+};
+
+// The pixel figures of one camera, or of all (camera empty).
+struct PixelScores {
+  std::string camera;  // the camera's name; empty for the total
+  long rays = 0, estimated_hits = 0, gt_hits = 0, both_hits = 0;
+  std::vector<PixelPrecisionRecall> precision_recall;  // one per RayErrorOptions threshold
+  // Both-hit pixels with an error above pixel_tail_error: all of them, those whose estimated hit
+  // is nearer the camera than the ground-truth hit (‖hit_e − c_e‖ < ‖hit_g − c_g‖, each from the
+  // camera centre of its own pose: "in front"), and the others ("behind").
+  long tail_count = 0, tail_front_count = 0, tail_behind_count = 0;
+  double tail = 0.0, tail_front = 0.0, tail_behind = 0.0;  // of both_hits (0 without)
 };
 
 struct RayErrorResult {
@@ -45,7 +73,10 @@ struct RayErrorResult {
   std::vector<double> quantiles;   // of the errors, one per level
   double share_above_large = 0.0;  // of the errors
   ErrorStats errors;
-  std::vector<double> sorted_errors;  // for the CDF
+  std::vector<double> sorted_errors;       // for the CDF
+  double pixel_tail_error = 0.0;           // metres, as in the options
+  PixelScores pixel;                       // all cameras
+  std::vector<PixelScores> pixel_cameras;  // one per rig camera, in rig order
 };
 
 // Throws InputError when there is no keyframe.

@@ -69,6 +69,55 @@ TEST_F(EvalTest, GroundTruthAgainstItselfGivesZeroErrors) {
   }
 }
 
+TEST_F(EvalTest, PixelFiguresPerCameraAndInTotal) {
+  WriteReconstruction(kEstimatedFromGt, gt_mesh_);
+  EvalOptions options = SmallOptions();
+  options.plots = false;
+  options.renders = false;
+  const EvalSummary summary = RunEvaluation(drive_, rec_, root_ / "report", options);
+  const PixelScores& p = summary.ray_errors.pixel;
+  EXPECT_EQ(p.rays, 20000);
+  ASSERT_EQ(p.precision_recall.size(), 2u);
+  EXPECT_DOUBLE_EQ(p.precision_recall[0].f_score, 1.0);  // errors of float precision only
+  EXPECT_DOUBLE_EQ(p.precision_recall[1].f_score, 1.0);
+  EXPECT_EQ(p.tail_count, 0);
+
+  std::ifstream json_file(root_ / "report" / "eval.json");
+  const nlohmann::json json = nlohmann::json::parse(json_file);
+  ASSERT_TRUE(json.contains("pixel"));
+  const nlohmann::json& pixel = json["pixel"];
+  EXPECT_EQ(pixel["rays"], json["ray_errors"]["rays"]);
+  EXPECT_DOUBLE_EQ(pixel["tail_error_m"].get<double>(), 1.0);
+  ASSERT_EQ(pixel["precision_recall"].size(), 2u);
+  EXPECT_DOUBLE_EQ(pixel["precision_recall"][0]["threshold_m"].get<double>(), 0.2);
+  EXPECT_DOUBLE_EQ(pixel["precision_recall"][1]["threshold_m"].get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(pixel["precision_recall"][1]["f_score"].get<double>(), 1.0);
+  for (const char* key : {"tail", "tail_front", "tail_behind", "tail_count", "tail_front_count",
+                          "tail_behind_count", "estimated_hits", "gt_hits", "both_hits"}) {
+    EXPECT_TRUE(pixel.contains(key)) << key;
+  }
+  ASSERT_EQ(pixel["cameras"].size(), 4u);
+  long rays = 0, within = 0;
+  for (size_t c = 0; c < 4; ++c) {
+    EXPECT_EQ(pixel["cameras"][c]["camera"], "cam" + std::to_string(c));
+    rays += pixel["cameras"][c]["rays"].get<long>();
+    within += pixel["cameras"][c]["precision_recall"][0]["within"].get<long>();
+  }
+  EXPECT_EQ(rays, 20000);
+  EXPECT_EQ(within, pixel["precision_recall"][0]["within"].get<long>());
+  // The existing figures stay.
+  EXPECT_TRUE(json["surfaces"].contains("precision_recall"));
+  EXPECT_TRUE(json["ray_errors"].contains("share_above_6m"));
+
+  std::ifstream md_file(root_ / "report" / "report.md");
+  std::stringstream md;
+  md << md_file.rdbuf();
+  EXPECT_NE(md.str().find("## Pixel precision / recall"), std::string::npos) << md.str();
+  EXPECT_NE(md.str().find("P / R / F at 20.0 cm"), std::string::npos) << md.str();
+  EXPECT_NE(md.str().find("| cam3 |"), std::string::npos) << md.str();
+  EXPECT_NE(md.str().find("| **all** | 20000 |"), std::string::npos) << md.str();
+}
+
 TEST_F(EvalTest, MissingGnuplotOnlyWarns) {
   WriteReconstruction(kEstimatedFromGt, gt_mesh_);
   EvalOptions options = SmallOptions();

@@ -12,6 +12,7 @@
 #include "calib/import.h"
 #include "calib/rig_io.h"
 #include "calib/rig_report.h"
+#include "synth/rig_presets.h"
 
 namespace omni {
 namespace {
@@ -27,6 +28,7 @@ struct CalibImportArgs {
 struct CalibShowArgs {
   std::filesystem::path rig;
   bool use_default = false;
+  std::string rig_preset;  // a built-in rig of synth/rig_presets.h
 };
 
 void RunCalibImport(const CalibImportArgs& args) {
@@ -67,6 +69,8 @@ void RunCalibShow(const CalibShowArgs& args) {
   Rig rig;
   if (args.use_default) {
     rig = DefaultRig();
+  } else if (!args.rig_preset.empty()) {
+    rig = synth::RigPresetRig(args.rig_preset);
   } else {
     if (args.rig.empty()) throw InputError("", "RIG", "give a rig.json file or --default");
     if (!std::filesystem::is_regular_file(args.rig)) throw InputError(args.rig, "", "no such file");
@@ -105,7 +109,12 @@ CLI::App* show = calib->add_subcommand(
 CLI::Option* rig_option = show->add_option("RIG", show_args->rig, "rig.json file to describe");
 CLI::Option* default_option = show->add_flag("--default", show_args->use_default,
                                              "Describe the built-in ladybug-like rig instead");
+CLI::Option* preset_option =
+    show->add_option("--rig-preset", show_args->rig_preset,
+                     "Describe a built-in rig preset instead: ladybug | pinhole | car | fisheye5");
 rig_option->excludes(default_option);
+rig_option->excludes(preset_option);
+default_option->excludes(preset_option);
 show->callback([show_args] { RunCalibShow(*show_args); });
 }  // namespace omni
 

@@ -12,6 +12,7 @@
 #include "calib/error.h"
 #include "calib/rig_io.h"
 #include "synth/drive_writer.h"
+#include "synth/rig_presets.h"
 #include "synth/synth_options.h"
 
 namespace omni {
@@ -23,16 +24,35 @@ struct SynthCommandOptions {
   int frames = 0;         // 0: the preset's
   int supersampling = 0;  // 0: the preset's
   std::string rig_path;
+  std::string rig_preset;  // empty: ladybug (or --rig)
+  double image_scale = 0;  // 0: the preset's
+  int frame_step = 1;
+  double exposure_spread = 0;
+  double exposure_offset = 0;
   std::string out;
   bool force = false;
   bool list_presets = false;
+  bool list_rig_presets = false;
 };
+
+void PrintRigPresets() {
+  for (const synth::RigPreset& preset : synth::RigPresets()) {
+    std::printf("%-8s %s (data/rigs/%s)\n", preset.name.c_str(), preset.description.c_str(),
+                preset.file.c_str());
+  }
+}
 
 void RunSynth(const SynthCommandOptions& command, const GlobalOptions& global) {
   if (command.list_presets) {
     for (const SynthPreset& preset : SynthPresets()) {
       std::printf("%-6s %s\n", preset.name.c_str(), preset.description.c_str());
     }
+    std::printf("\nrig presets (--rig-preset):\n");
+    PrintRigPresets();
+    return;
+  }
+  if (command.list_rig_presets) {
+    PrintRigPresets();
     return;
   }
   SynthOptions options = SynthPresetOptions(command.preset);
@@ -43,7 +63,18 @@ void RunSynth(const SynthCommandOptions& command, const GlobalOptions& global) {
     options.trajectory.num_frames = command.frames;
   }
   if (command.supersampling != 0) options.render.supersampling = command.supersampling;
-  const Rig rig = command.rig_path.empty() ? DefaultRig() : ReadRigJson(command.rig_path);
+  if (command.image_scale != 0) options.render.image_scale = command.image_scale;
+  if (command.frame_step < 1) throw InputError("", "--frame-step", "must be at least 1");
+  options.trajectory.frame_step = command.frame_step;
+  if (command.exposure_spread < 0 || command.exposure_spread >= 0.9)
+    throw InputError("", "--exposure-spread", "must be in [0, 0.9)");
+  options.render.exposure_spread = command.exposure_spread;
+  if (command.exposure_offset < 0 || command.exposure_offset > 64)
+    throw InputError("", "--exposure-offset", "must be in [0, 64] grey levels");
+  options.render.exposure_offset = command.exposure_offset;
+  const Rig rig = !command.rig_path.empty()     ? ReadRigJson(command.rig_path)
+                  : !command.rig_preset.empty() ? synth::RigPresetRig(command.rig_preset)
+                                                : DefaultRig();
   synth::SynthWriteOptions write_options;
   write_options.force = command.force;
   write_options.progress = !global.quiet;
@@ -73,10 +104,35 @@ void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global) {
   synth->add_option("--frames", command->frames, "Number of frames (default: the preset's)");
   synth->add_option("--supersampling", command->supersampling,
                     "Rays per pixel side at edges (default: the preset's, 3)");
-  synth->add_option("--rig", command->rig_path, "rig.json (default: the built-in ladybug-like)");
+  CLI::Option* rig_option = synth->add_option("--rig", command->rig_path,
+                                              "rig.json (default: the built-in ladybug-like)");
+  synth
+      ->add_option("--rig-preset", command->rig_preset,
+                   "Built-in rig: ladybug (the default) | pinhole | car | fisheye5 (see "
+                   "--list-rig-presets)")
+      ->excludes(rig_option);
+  synth->add_option("--image-scale", command->image_scale,
+                    "Scale every camera's size and intrinsics, e.g. 0.25 for quick car drives "
+                    "(default: the preset's, 1)");
+  synth
+      ->add_option("--frame-step", command->frame_step,
+                   "Write one frame in K of the trajectory, named by its trajectory index, with "
+                   "a frames.csv of the capture times (low frame rates)")
+      ->capture_default_str();
+  synth
+      ->add_option("--exposure-spread", command->exposure_spread,
+                   "Per-camera exposure gain drawn in [1-E, 1+E] from the seed")
+      ->capture_default_str();
+  synth
+      ->add_option("--exposure-offset", command->exposure_offset,
+                   "Per-camera exposure offset drawn in [-O, O] grey levels from the seed")
+      ->capture_default_str();
   synth->add_option("--out", command->out, "Output drive folder");
   synth->add_flag("--force", command->force, "Replace a non-empty --out (at the end only)");
-  synth->add_flag("--list-presets", command->list_presets, "Describe the presets and exit");
+  synth->add_flag("--list-presets", command->list_presets,
+                  "Describe the drive presets and the rig presets and exit");
+  synth->add_flag("--list-rig-presets", command->list_rig_presets,
+                  "Describe the rig presets and exit");
   synth->callback([command, &global] { RunSynth(*command, global); });
 }
 

@@ -53,6 +53,10 @@ Rigid3d SyntheticDrive::WorldFromCamera(size_t frame, size_t camera) const {
   return trajectory.world_from_rig.at(frame) * rig.cameras.at(camera).cam_from_rig.Inverse();
 }
 
+double SyntheticDrive::FrameTimestamp(size_t frame) const {
+  return frame / options.trajectory.frame_rate;
+}
+
 uint64_t SyntheticDrive::ImageSeed(size_t frame, size_t camera) const {
   return Hash(options.seed, 0x1A6E, frame, camera);
 }
@@ -72,7 +76,15 @@ SyntheticDrive MakeSyntheticDrive(const SynthOptions& options, const Rig& rig) {
   for (size_t c = 0; c < drive.rig.NumCameras(); ++c) {
     drive.camera_gains.push_back(1.0 + options.render.camera_gain_spread *
                                            Uniform(Hash(options.seed, 0x6A1, c), -1, 1));
+    // Exactly 1 and 0 without exposure differences, so that such drives keep their bytes.
+    const double spread = options.render.exposure_spread, offset = options.render.exposure_offset;
+    drive.exposure_gains.push_back(
+        spread > 0 ? 1.0 + spread * Uniform(Hash(options.seed, 0xE7905E, c), -1, 1) : 1.0);
+    drive.exposure_offsets.push_back(
+        offset > 0 ? offset * Uniform(Hash(options.seed, 0x0FF5E7, c), -1, 1) : 0.0);
   }
+  const size_t step = static_cast<size_t>(options.trajectory.frame_step);
+  for (size_t f = 0; f < drive.NumFrames(); f += step) drive.written_frames.push_back(f);
   return drive;
 }
 
@@ -100,6 +112,11 @@ std::string SceneJson(const SyntheticDrive& drive) {
       {"rendering",
        "non-central: every camera is rendered from its own centre, cam_from_rig of rig.json"},
       {"camera_gains", drive.camera_gains}};
+  const bool exposure = r.exposure_spread > 0 || r.exposure_offset > 0;
+  if (exposure) {
+    j["rig"]["exposure_gains"] = drive.exposure_gains;
+    j["rig"]["exposure_offsets"] = drive.exposure_offsets;
+  }
   j["city"] = {{"block_size_x", c.block_size_x},
                {"block_size_y", c.block_size_y},
                {"block_jitter", c.block_jitter},
@@ -145,6 +162,12 @@ std::string SceneJson(const SyntheticDrive& drive) {
                      {"mean_frame_spacing",
                       drive.trajectory.driven_length / std::max<size_t>(1, drive.NumFrames() - 1)},
                      {"direction", "counter-clockwise seen from above, right lane"}};
+  const bool stepped = t.frame_step > 1;
+  if (stepped) {
+    // Only with a frame step, so that the drives without one keep their bytes.
+    j["trajectory"]["frame_step"] = t.frame_step;
+    j["trajectory"]["frames_written"] = drive.written_frames.size();
+  }
   j["render"] = {{"supersampling", r.supersampling},
                  {"adaptive", r.adaptive},
                  {"refine_contrast", r.refine_contrast},
@@ -159,6 +182,10 @@ std::string SceneJson(const SyntheticDrive& drive) {
                  {"sky_zenith", r.sky_zenith},
                  {"sky", "no hit: gradient from sky_horizon to sky_zenith by elevation"},
                  {"renderer", "Embree 3, rays from calib Camera::Unproject"}};
+  if (exposure) {
+    j["render"]["exposure_spread"] = r.exposure_spread;
+    j["render"]["exposure_offset"] = r.exposure_offset;
+  }
   j["scene"] = {{"triangles", drive.scene.mesh.triangles.size()},
                 {"vertices", drive.scene.mesh.vertices.size()},
                 {"buildings", drive.scene.num_buildings},
@@ -168,6 +195,15 @@ std::string SceneJson(const SyntheticDrive& drive) {
   j["files"] = {{"images", "images/<camera>/<frame>.png, 8-bit grey, frames 000000..."},
                 {"poses", "gt/poses.tum: world_from_rig, timestamp = frame / frame_rate"},
                 {"mesh", "gt/mesh.ply: every rendered triangle, metres, facing free space"}};
+  if (stepped) {
+    j["files"]["images"] =
+        "images/<camera>/<frame>.png, 8-bit grey, one trajectory frame in frame_step, named by "
+        "its trajectory index";
+    j["files"]["poses"] =
+        "gt/poses.tum: world_from_rig of the frames written, timestamp = "
+        "trajectory index / frame_rate";
+    j["files"]["frames"] = "frames.csv: frame,camera,timestamp_s, one row per image";
+  }
   return j.dump(2) + "\n";
 }
 
@@ -201,30 +237,43 @@ SynthSummary WriteSyntheticDrive(const SynthOptions& options, const Rig& rig,
 
   WriteRigJson(drive.rig, staging / "rig.json");
   std::vector<StampedPose> poses;
-  for (size_t f = 0; f < drive.NumFrames(); ++f) {
-    poses.push_back({f / options.trajectory.frame_rate, drive.trajectory.world_from_rig[f]});
+  for (const size_t f : drive.written_frames) {
+    poses.push_back({drive.FrameTimestamp(f), drive.trajectory.world_from_rig[f]});
   }
   WriteTum(poses, staging / "gt" / "poses.tum");
+  if (options.trajectory.frame_step > 1) {
+    // The drive's own clock (calib/drive.h): the same timestamps as gt/poses.tum.
+    std::string csv = "frame,camera,timestamp_s\n";
+    for (const size_t f : drive.written_frames) {
+      char timestamp[64];
+      std::snprintf(timestamp, sizeof(timestamp), "%.9f", drive.FrameTimestamp(f));
+      for (const Camera& camera : drive.rig.cameras) {
+        csv += SynthFrameName(f) + "," + camera.name + "," + timestamp + "\n";
+      }
+    }
+    WriteTextFileAtomically(staging / "frames.csv", csv);
+  }
   WritePlyMesh(drive.scene.mesh, staging / "gt" / "mesh.ply");
   WriteTextFileAtomically(staging / "gt" / "scene.json", SceneJson(drive));
 
   const SceneRenderer renderer(drive.scene, options.seed, options.render);
   const size_t num_cameras = drive.rig.NumCameras();
-  const size_t num_images = drive.NumFrames() * num_cameras;
+  const size_t num_frames = drive.written_frames.size();
+  const size_t num_images = num_frames * num_cameras;
   if (write_options.progress)
-    spdlog::info("synth: {} frames x {} cameras, {} triangles, loop {:.1f} m -> {}",
-                 drive.NumFrames(), num_cameras, drive.scene.mesh.triangles.size(),
-                 drive.trajectory.path.Length(), out.string());
+    spdlog::info("synth: {} frames x {} cameras, {} triangles, loop {:.1f} m -> {}", num_frames,
+                 num_cameras, drive.scene.mesh.triangles.size(), drive.trajectory.path.Length(),
+                 out.string());
   const Clock::time_point render_start = Clock::now();
   std::atomic<size_t> done{0};
   std::mutex error_mutex;
   std::string error;
   const std::vector<int> png_params = {cv::IMWRITE_PNG_COMPRESSION, options.render.png_compression};
   tbb::parallel_for(size_t{0}, num_images, [&](size_t index) {
-    const size_t frame = index / num_cameras, camera = index % num_cameras;
-    const cv::Mat image =
-        renderer.Render(drive.rig.cameras[camera], drive.WorldFromCamera(frame, camera),
-                        drive.ImageSeed(frame, camera), drive.camera_gains[camera]);
+    const size_t frame = drive.written_frames[index / num_cameras], camera = index % num_cameras;
+    const cv::Mat image = renderer.Render(
+        drive.rig.cameras[camera], drive.WorldFromCamera(frame, camera),
+        drive.ImageSeed(frame, camera), drive.RenderGain(camera), drive.exposure_offsets[camera]);
     const fs::path path =
         staging / "images" / drive.rig.cameras[camera].name / (SynthFrameName(frame) + ".png");
     bool written = false;
@@ -265,7 +314,7 @@ SynthSummary WriteSyntheticDrive(const SynthOptions& options, const Rig& rig,
     if (ec)
       throw InputError(out, "--out", "cannot rename " + staging.string() + ": " + ec.message());
   }
-  summary.frames = drive.NumFrames();
+  summary.frames = num_frames;
   summary.cameras = num_cameras;
   summary.triangles = drive.scene.mesh.triangles.size();
   summary.loop_length = drive.trajectory.path.Length();

@@ -177,7 +177,7 @@ std::optional<SurfaceHit> SceneRenderer::CastPixel(const Camera& camera,
 }
 
 cv::Mat SceneRenderer::Render(const Camera& camera, const Rigid3d& world_from_cam,
-                              uint64_t image_seed, double gain) const {
+                              uint64_t image_seed, double gain, double offset) const {
   const int width = camera.width, height = camera.height;
   const SynthRenderOptions& options = impl_->options;
   const double pixel_angle = 1.0 / std::max(camera.fx(), camera.fy());
@@ -262,7 +262,7 @@ cv::Mat SceneRenderer::Render(const Camera& camera, const Rigid3d& world_from_ca
           local_rays += n * n;
         }
         const double noise = sigma > 0 ? sigma * Gaussian(Hash(image_seed, 0x401CE, i)) : 0.0;
-        const double level = std::round(255.0 * gain * v + noise);
+        const double level = std::round(255.0 * gain * v + offset + noise);
         row[x] = static_cast<uint8_t>(std::min(255.0, std::max(0.0, level)));
       }
     }

@@ -41,9 +41,10 @@ class SceneRenderer {
                                       const Eigen::Vector2d& pixel) const;
 
   // An 8-bit grey image (CV_8UC1, camera.height x camera.width). `image_seed` drives the
-  // supersampling jitter and the sensor noise; `gain` multiplies the exposure. Uses every core.
+  // supersampling jitter and the sensor noise; `gain` multiplies the exposure and `offset` (grey
+  // levels) is added to it, before the noise and the quantisation. Uses every core.
   cv::Mat Render(const Camera& camera, const Rigid3d& world_from_cam, uint64_t image_seed,
-                 double gain) const;
+                 double gain, double offset = 0.0) const;
 
   // Rays cast by Render since construction.
   uint64_t RaysCast() const { return rays_.load(); }

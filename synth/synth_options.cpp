@@ -61,6 +61,9 @@ std::string SynthTrajectoryOptions::Check() const {
           "trajectory.pitch/roll_amplitude_deg", "must be within 10 degrees", &e);
   Require(std::abs(bounce_amplitude) <= 0.5, "trajectory.bounce_amplitude", "must be <= 0.5 m", &e);
   Require(suspension_period > 0, "trajectory.suspension_period", "must be positive", &e);
+  Require(frame_step >= 1, "trajectory.frame_step", "must be at least 1", &e);
+  Require(frame_step == 1 || (num_frames - 1) / frame_step >= 1, "trajectory.frame_step",
+          "must leave at least 2 of the num_frames frames", &e);
   return e;
 }
 
@@ -80,6 +83,10 @@ std::string SynthRenderOptions::Check() const {
           "render.sky_horizon/sky_zenith", "must be in [0, 1]", &e);
   Require(camera_gain_spread >= 0 && camera_gain_spread < 0.9, "render.camera_gain_spread",
           "must be in [0, 0.9)", &e);
+  Require(exposure_spread >= 0 && exposure_spread < 0.9, "render.exposure_spread",
+          "must be in [0, 0.9)", &e);
+  Require(exposure_offset >= 0 && exposure_offset <= 64, "render.exposure_offset",
+          "must be in [0, 64] grey levels", &e);
   Require(noise_sigma >= 0, "render.noise_sigma", "must not be negative", &e);
   Require(png_compression >= 0 && png_compression <= 9, "render.png_compression",
           "must be in [0, 9]", &e);

@@ -56,6 +56,10 @@ struct SynthTrajectoryOptions {
   double roll_amplitude_deg = 0.5;   // suspension roll
   double bounce_amplitude = 0.02;    // suspension height, metres
   double suspension_period = 1.7;    // seconds
+  // Low frame rates: only one frame in frame_step of the num_frames above is written, keeping
+  // its trajectory index as its name (000000, 000010, ...) and its capture time index /
+  // frame_rate; with frame_step > 1 the drive gets a frames.csv of those times.
+  int frame_step = 1;
 
   std::string Check() const;
 };
@@ -77,9 +81,15 @@ struct SynthRenderOptions {
   double sky_horizon = 0.62;
   double sky_zenith = 0.45;
   double camera_gain_spread = 0.1;  // each camera's gain is 1 +- this, uniform
-  double noise_sigma = 1.5;         // sensor noise, 8-bit grey levels
-  int png_compression = 1;          // 0..9, cv::IMWRITE_PNG_COMPRESSION
-  double image_scale = 1.0;         // scales each camera's size and intrinsics (tests)
+  // Exposure differences between the cameras, on top of camera_gain_spread: each camera's
+  // exposure gain is drawn uniformly in [1 - exposure_spread, 1 + exposure_spread] and its
+  // offset in [-exposure_offset, exposure_offset] grey levels, from the seed; applied to the
+  // rendered intensity before the noise and the quantisation. 0 and 0 change nothing.
+  double exposure_spread = 0.0;
+  double exposure_offset = 0.0;  // 8-bit grey levels
+  double noise_sigma = 1.5;      // sensor noise, 8-bit grey levels
+  int png_compression = 1;       // 0..9, cv::IMWRITE_PNG_COMPRESSION
+  double image_scale = 1.0;      // scales each camera's size and intrinsics (tests)
 
   std::string Check() const;
 };

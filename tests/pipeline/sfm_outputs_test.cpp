@@ -199,14 +199,15 @@ TEST(SfmStats, CountsFramesAndWritesBothFiles) {
        {"name,value\n", "\nframes,4\n", "\nframes_skipped,1\n", "\nframes_not_tracked,1\n",
         "\nkeyframes,2\n", "\npoints,123\n", "\nmean_matched_per_frame,170\n",
         "\nmean_inliers_per_tracked_frame,75\n", "\nobservations,400\n",
-        "\nmean_reprojection_error_px,0.25\n", "\nframes_per_second,2\n"})
+        "\nmean_reprojection_error_px,0.25\n", "\nframes_per_second,2\n", "\nusable,1\n"})
     EXPECT_NE(summary.find(row), std::string::npos) << row << " in\n" << summary;
   const std::vector<std::string> stages =
       testing::SplitText(testing::ReadTextFile(dir.path() / "sfm_stages.csv"));
-  ASSERT_EQ(stages.size(), 11u);
+  ASSERT_EQ(stages.size(), 12u);
   EXPECT_EQ(stages[0], "stage,seconds,ms_per_frame");
   EXPECT_EQ(stages[2], "detect,1,250");
-  EXPECT_EQ(stages[9], "other,1,250");  // total - detect
+  EXPECT_EQ(stages[8], "final_bundle_adjustment,0,0");
+  EXPECT_EQ(stages[10], "other,1,250");  // total - detect
   EXPECT_EQ(stages.back(), "total,2,500");
 }
 

@@ -42,18 +42,18 @@ TEST_F(EvalTest, CommandLine) {
   EXPECT_NE(output.find("\"nonmanifold_vertices\": 1"), std::string::npos) << output;
   EXPECT_EQ(RunOmnisculpt("mesh-check " + (root_ / "missing.ply").string(), &output), 2) << output;
 
-  // A sheet of 4 × 4 squares with two holes: a 2-manifold with boundary, accepted only when
-  // asked, with its three boundary loops (the rim and the two holes) counted.
+  // A sheet of 5 × 5 squares with two holes inside: a 2-manifold with boundary, accepted only
+  // when asked, with its three boundary loops (the rim and the two holes) counted.
   TriangleMesh sheet;
-  for (int row = 0; row <= 4; ++row) {
-    for (int column = 0; column <= 4; ++column) sheet.vertices.emplace_back(column, row, 0.0);
+  for (int row = 0; row <= 5; ++row) {
+    for (int column = 0; column <= 5; ++column) sheet.vertices.emplace_back(column, row, 0.0);
   }
-  for (int row = 0; row < 4; ++row) {
-    for (int column = 0; column < 4; ++column) {
-      if ((column == 1 && row == 1) || (column == 2 && row == 3)) continue;
-      const int a = row * 5 + column;
-      sheet.triangles.emplace_back(a, a + 1, a + 6);
-      sheet.triangles.emplace_back(a, a + 6, a + 5);
+  for (int row = 0; row < 5; ++row) {
+    for (int column = 0; column < 5; ++column) {
+      if ((column == 1 && row == 1) || (column == 3 && row == 3)) continue;
+      const int a = row * 6 + column;
+      sheet.triangles.emplace_back(a, a + 1, a + 7);
+      sheet.triangles.emplace_back(a, a + 7, a + 6);
     }
   }
   WritePlyMesh(sheet, root_ / "sheet.ply");

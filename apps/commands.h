@@ -10,6 +10,7 @@
 namespace omni {
 
 struct SculptorOptions;
+struct ObservedMeshOptions;
 enum class EnclosingMode;
 
 // Options every subcommand shares.
@@ -45,6 +46,9 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global);
 // ApplyEnclosingOption sets sculptor->enclosing from the --enclosing value (InputError if bad).
 void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOptions* sculptor);
 void ApplyEnclosingOption(const std::string& enclosing, SculptorOptions* sculptor);
+// The options of the observed surface, surface.ply (ObservedMeshOptions), shared by surface and
+// reconstruct.
+void AddObservedMeshOptions(CLI::App* command, ObservedMeshOptions* observed);
 // The --enclosing value of a mode ("ball" or "conflict").
 std::string EnclosingName(EnclosingMode mode);
 

@@ -32,12 +32,14 @@ void RegisterMeshCheck(CLI::App& app) {
   CLI::App* command = app.add_subcommand(
       "mesh-check",
       "Topological checks of a PLY mesh: edges in other than two triangles, vertex links, "
-      "orientation, components, Euler characteristic and genus, degenerate triangles. Exit "
-      "code 1 when the mesh is not a closed oriented 2-manifold.");
+      "orientation, components, Euler characteristic and genus, boundary loops, degenerate "
+      "triangles. Exit code 1 when the mesh is not a closed oriented 2-manifold (with "
+      "--allow-boundary: not an oriented 2-manifold, closed or with boundary).");
   command->add_option("MESH", options->mesh_path, "PLY mesh")->required();
   command->add_flag("--json", options->json, "Print the report as JSON");
   command->add_flag("--allow-boundary", options->check.allow_boundary,
-                    "Accept a 2-manifold with boundary");
+                    "Accept a 2-manifold with boundary (surface.ply); the boundary loops are "
+                    "counted either way");
   command->callback([options] {
     const TriangleMesh mesh = ReadPlyMesh(options->mesh_path);
     MeshCheckReport report;

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <unordered_map>
 
 #include "apps/commands.h"
 #include "apps/sfm_options.h"
@@ -151,8 +152,26 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
   const SfmOutputs outputs = WriteSfmOutputs(drive, sfm, partial, output_options);
   spdlog::info("reconstruct: point colours from {} keyframe images in {:.2f} s",
                outputs.colors.images_read, outputs.colors.seconds);
-  // No surface file without a surface (a run that is not usable says why).
-  if (!result.mesh.triangles.empty()) WritePlyMesh(result.mesh, partial / "surface.ply");
+  // No surface file without a surface (a run that is not usable says why). Each vertex takes
+  // its point's colour of points.ply.
+  std::unordered_map<PointId, Rgb8> point_colors;
+  {
+    size_t i = 0;
+    for (const FinalizedKeyframe& keyframe : sfm.keyframes) {
+      for (const FinalizedPoint& point : keyframe.points) {
+        if (i < outputs.cloud.colors.size())
+          point_colors[PointId(static_cast<uint32_t>(point.point))] = outputs.cloud.colors[i];
+        ++i;
+      }
+    }
+  }
+  TriangleMesh surface = result.mesh, closed = result.closed_mesh;
+  ColorMeshVertices(result.mesh_points, point_colors, &surface);
+  ColorMeshVertices(result.closed_mesh_points, point_colors, &closed);
+  if (!closed.triangles.empty()) {
+    WritePlyMesh(surface, partial / "surface.ply");
+    WritePlyMesh(closed, partial / "surface_closed.ply");
+  }
   std::ostringstream keyframes_csv;
   keyframes_csv << PipelineKeyframesCsvHeader() << '\n';
   for (const PipelineKeyframeRow& row : result.surface_rows)
@@ -165,12 +184,17 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
     queue_ms.push_back(row.queue_ms);
   }
   const SfmStats& stats = outputs.stats;
-  const MeshCheckReport manifold = CheckMesh(result.mesh);
+  // surface.ply: an oriented 2-manifold with boundary; surface_closed.ply: closed.
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  bounded.allow_empty = !result.closed_mesh.triangles.empty();
+  const MeshCheckReport manifold = CheckMesh(result.mesh, bounded);
+  const MeshCheckReport closed_manifold = CheckMesh(result.closed_mesh);
   // A usable result: a usable SfM map and a surface with triangles.
   std::string failure;
   if (sfm.outcome != SfmOutcome::kUsable)
     failure = sfm.outcome_reason;
-  else if (result.mesh.triangles.empty())
+  else if (result.closed_mesh.triangles.empty())
     failure = "the surface is empty (" + sfm.outcome_reason + ")";
   const double frames_per_second = sfm.frames_total / std::max(result.seconds, 1e-9);
   nlohmann::json summary = {
@@ -188,6 +212,9 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       {"points", outputs.cloud.points.size()},
       {"triangles", result.mesh.triangles.size()},
       {"manifold", manifold.ok},
+      {"boundary_loops", manifold.boundary_loops},
+      {"closed_triangles", result.closed_mesh.triangles.size()},
+      {"closed_manifold", closed_manifold.ok},
       {"seconds", result.seconds},
       {"frames_per_second", frames_per_second},
       {"sfm_seconds", sfm.seconds},
@@ -252,26 +279,35 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
   Publish(partial, out);
 
   std::string written;
-  if (!result.mesh.triangles.empty()) written += "surface.ply, ";
+  if (!result.closed_mesh.triangles.empty()) written += "surface.ply, surface_closed.ply, ";
   if (sfm.outcome != SfmOutcome::kNotInitialised) written += "points.ply, poses.tum, sparse/, ";
   written += std::string("stats/, ") + kSummaryFile;
   std::printf(
       "reconstruct: %zu frames (%zu skipped, %zu not tracked) in %.1f s (%.1f frames/s), %zu "
-      "keyframes, %zu points, %zu triangles, manifold %s%s\n"
+      "keyframes, %zu points, %zu observed triangles of %zu (manifold with boundary %s, "
+      "closed %s)%s\n"
       "  surface ms per keyframe: median %.1f, p95 %.1f; queue: at most %zu of %d waiting, "
       "the SfM waited %.1f s for room; %zu loop closure(s), surface replays %.1f s\n"
       "  wrote %s (%s)\n",
       sfm.frames_total, sfm.skipped.size(), stats.frames_not_tracked, result.seconds,
       frames_per_second, sfm.keyframes.size(), outputs.cloud.points.size(),
-      result.mesh.triangles.size(), manifold.ok ? "yes" : "NO",
-      failure.empty() ? "" : "; NOT USABLE", Quantile(surface_ms, 0.5), Quantile(surface_ms, 0.95),
-      result.queue_max_size, o.pipeline.queue_capacity, result.queue_blocked_seconds,
-      sfm.loop_closures.size(), result.replay_seconds, out.c_str(), written.c_str());
+      result.mesh.triangles.size(), result.closed_mesh.triangles.size(), manifold.ok ? "yes" : "NO",
+      closed_manifold.ok ? "yes" : "NO", failure.empty() ? "" : "; NOT USABLE",
+      Quantile(surface_ms, 0.5), Quantile(surface_ms, 0.95), result.queue_max_size,
+      o.pipeline.queue_capacity, result.queue_blocked_seconds, sfm.loop_closures.size(),
+      result.replay_seconds, out.c_str(), written.c_str());
   if (!failure.empty()) {
     ReportNotUsable(drive.folder().string() + ": " + failure + "; " + out.string() + "/" +
                     kSummaryFile + " and stats/sfm_frames.csv say what happened");
+  } else if (!closed_manifold.ok) {
+    spdlog::error("reconstruct: δO is not a closed oriented 2-manifold: {}",
+                  closed_manifold.Summary());
+    CommandExitCode() = kExitCheckFailed;
   } else if (!manifold.ok) {
-    spdlog::error("reconstruct: the surface is not an oriented 2-manifold: {}", manifold.Summary());
+    spdlog::error(
+        "reconstruct: the observed surface is not an oriented 2-manifold with "
+        "boundary: {}",
+        manifold.Summary());
     CommandExitCode() = kExitCheckFailed;
   }
 }
@@ -317,7 +353,7 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
       ->required();
   command
       ->add_option("--out", o->out,
-                   "Output folder (surface.ply, points.ply, poses.tum, stats/, "
+                   "Output folder (surface.ply, surface_closed.ply, points.ply, poses.tum, stats/, "
                    "reconstruct.json); written as OUT.incomplete and renamed when complete")
       ->required();
   command->add_flag("--force", o->force, "Replace OUT if it holds a previous reconstruction");
@@ -336,6 +372,7 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   AddSfmOptions(command, &o->sfm);
   AddEnclosingOptions(command, &o->enclosing, &o->pipeline.sculptor);
+  AddObservedMeshOptions(command, &o->pipeline.sculptor.observed);
   command->callback([o, &global] { RunReconstruct(*o, global); });
 }
 

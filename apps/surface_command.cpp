@@ -1,5 +1,6 @@
 // `omnisculpt surface`: the incremental sculptor of surface/ fed by a simulated
-// perfect SfM on a drive's ground truth (--from-gt), writing surface.ply and
+// perfect SfM on a drive's ground truth (--from-gt) or by a COLMAP model (--colmap), writing
+// surface.ply (the observed surface), surface_closed.ply (δO), points.ply and
 // stats/keyframes.csv.
 
 #include <spdlog/spdlog.h>
@@ -11,6 +12,8 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <unordered_map>
+#include <vector>
 
 #include "apps/commands.h"
 #include "apps/surface/colmap_keyframes.h"
@@ -58,9 +61,13 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   ThrowIfInvalid(o.gt.Check(), "GtKeyframeOptions");
   const auto start = std::chrono::steady_clock::now();
   std::vector<StampedPose> keyframe_poses;  // known for --from-gt only
+  std::vector<size_t> keyframe_frames;      // known for --from-gt only
+  std::unordered_map<PointId, Rgb8> point_colors;
   const std::vector<SurfaceKeyframe> stream =
-      o.colmap.empty() ? LoadGtKeyframes(o.from_gt, o.gt, nullptr, &keyframe_poses)
-                       : LoadColmapKeyframes(o.colmap);
+      o.colmap.empty()
+          ? LoadGtKeyframes(o.from_gt, o.gt, nullptr, &keyframe_poses, &keyframe_frames)
+          : LoadColmapKeyframes(o.colmap, &point_colors);
+  if (o.colmap.empty()) point_colors = GtPointColors(o.from_gt, stream, keyframe_frames);
   const double gen_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   size_t num_points = 0;
@@ -96,8 +103,15 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   snapshot(sculptor.Finish());
 
   std::filesystem::create_directories(out / "stats");
-  const TriangleMesh mesh = sculptor.ExtractMesh();
+  // The closed δO and its observed part, each vertex coloured as its point.
+  std::vector<PointId> closed_points, observed_points;
+  TriangleMesh closed = sculptor.ExtractMesh(&closed_points);
+  ObservedMeshStats observed_stats;
+  TriangleMesh mesh = sculptor.ExtractObservedMesh(&observed_points, &observed_stats);
+  ColorMeshVertices(closed_points, point_colors, &closed);
+  ColorMeshVertices(observed_points, point_colors, &mesh);
   WritePlyMesh(mesh, out / "surface.ply");
+  WritePlyMesh(closed, out / "surface_closed.ply");
   std::ostringstream csv;
   csv << KeyframeStatsCsvHeader() << "\n";
   for (const KeyframeStats& st : stats) csv << KeyframeStatsCsvRow(st) << "\n";
@@ -107,7 +121,12 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   // poses of the simulated SfM.
   PointCloud points;
   for (const SurfaceKeyframe& kf : stream) {
-    for (const SurfacePoint& point : kf.points) points.points.push_back(point.position);
+    for (const SurfacePoint& point : kf.points) {
+      points.points.push_back(point.position);
+      if (point_colors.empty()) continue;
+      const auto color = point_colors.find(point.id);
+      points.colors.push_back(color != point_colors.end() ? color->second : Rgb8(128, 128, 128));
+    }
   }
   WritePlyPoints(points, out / "points.ply");
   if (!keyframe_poses.empty()) WriteTum(keyframe_poses, out / "poses.tum");
@@ -131,23 +150,40 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       "surface: points filtered (paper §5.1): %zu invalid, %zu below the ground, %zu too far, "
       "%zu narrow aperture\n",
       filtered[0], filtered[1], filtered[2], filtered[3]);
-  const MeshCheckReport report = CheckMesh(mesh);
+  const MeshCheckReport closed_report = CheckMesh(closed);
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  bounded.allow_empty = !closed.triangles.empty();
+  const MeshCheckReport report = CheckMesh(mesh, bounded);
   std::printf(
-      "surface: %zu keyframes, %zu points added, %zu rejected (%.2f%%), %zu triangles, "
-      "manifold %s\n"
+      "surface: %zu keyframes, %zu points added, %zu rejected (%.2f%%), %zu triangles of δO, "
+      "closed manifold %s\n"
+      "  observed: %zu triangles in %ld boundary loops, manifold with boundary %s; left out: "
+      "%zu with a Steiner vertex, %zu long, %zu sparse, %zu unseen, %zu around touching "
+      "boundaries, %zu in small components\n"
       "  ms per incremental keyframe: median %.1f, p95 %.1f, max %.1f; max |E| %zu\n"
-      "  wrote %s and %s\n",
+      "  wrote %s, %s and %s\n",
       stream.size(), added, rejected, 100.0 * rejected / std::max<size_t>(1, added + rejected),
-      mesh.triangles.size(), report.ok ? "yes" : "NO", Quantile(ms, 0.5),
+      closed.triangles.size(), closed_report.ok ? "yes" : "NO", mesh.triangles.size(),
+      report.boundary_loops, report.ok ? "yes" : "NO", observed_stats.steiner,
+      observed_stats.long_edges, observed_stats.sparse, observed_stats.unseen,
+      observed_stats.manifold_repair, observed_stats.small_components, Quantile(ms, 0.5),
       Quantile(ms, 0.95), ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()), max_e,
-      (out / "surface.ply").c_str(), (out / "stats" / "keyframes.csv").c_str());
-  if (mesh.triangles.empty()) {
+      (out / "surface.ply").c_str(), (out / "surface_closed.ply").c_str(),
+      (out / "stats" / "keyframes.csv").c_str());
+  if (closed.triangles.empty()) {
     ReportNotUsable((o.colmap.empty() ? o.from_gt : o.colmap) + ": the surface is empty (" +
                     std::to_string(stream.size()) + " keyframes, " + std::to_string(added) +
                     " points added)");
-  } else if (!report.ok) {
-    spdlog::error("surface: the output is not an oriented 2-manifold: {}", report.Summary());
+  } else if (!closed_report.ok) {
+    spdlog::error("surface: δO is not a closed oriented 2-manifold: {}", closed_report.Summary());
     CommandExitCode() = kExitCheckFailed;
+  } else if (!report.ok) {
+    spdlog::error("surface: the observed surface is not an oriented 2-manifold with boundary: {}",
+                  report.Summary());
+    CommandExitCode() = kExitCheckFailed;
+  } else if (mesh.triangles.empty()) {
+    spdlog::warn("surface: no triangle of δO is observed: surface.ply is empty");
   }
 }
 
@@ -195,6 +231,31 @@ void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOpti
       "vertex stars");
 }
 
+void AddObservedMeshOptions(CLI::App* command, ObservedMeshOptions* observed) {
+  command
+      ->add_option("--observed-max-edge", observed->max_edge_factor,
+                   "surface.ply: leave out the triangles of δO with an edge longer than this "
+                   "times s (the ceiling over the streets, the caps; 0: no bound)")
+      ->capture_default_str();
+  command
+      ->add_option("--observed-max-spacing", observed->max_spacing_factor,
+                   "surface.ply: leave out the triangles with an edge longer than this times "
+                   "the local point spacing (0: no bound)")
+      ->capture_default_str();
+  command
+      ->add_option("--observed-min-view-cos", observed->min_view_cosine,
+                   "surface.ply: a triangle is seen when a ray centre of one of its vertices is "
+                   "in front of it at a cosine above this")
+      ->capture_default_str();
+  command->add_flag_callback(
+      "--observed-keep-unseen", [observed] { observed->require_seen = false; },
+      "surface.ply: keep the triangles that no ray centre of their vertices sees from the front");
+  command
+      ->add_option("--observed-min-component", observed->min_component_triangles,
+                   "surface.ply: leave out the components with fewer triangles (0: none)")
+      ->capture_default_str();
+}
+
 void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
   auto o = std::make_shared<SurfaceCommandOptions>();
   CLI::App* command = app.add_subcommand(
@@ -208,8 +269,10 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                       "sharing a file name in different folders form one rig keyframe");
   command->add_option(
       "--out", o->out,
-      "Output folder (surface.ply, points.ply, poses.tum with --from-gt, stats/keyframes.csv)");
+      "Output folder (surface.ply, surface_closed.ply, points.ply, poses.tum with --from-gt, "
+      "stats/keyframes.csv)");
   AddEnclosingOptions(command, &o->enclosing, &o->sculptor);
+  AddObservedMeshOptions(command, &o->sculptor.observed);
   command
       ->add_option("--grow-closure-rounds", o->sculptor.grow_closure_rounds,
                    "conflict E: rounds of growth over the free cells around the vertices whose "

@@ -180,6 +180,8 @@ MeshCheckReport CheckMesh(const TriangleMesh& mesh, const MeshCheckOptions& opti
   }
   std::sort(half_edges.begin(), half_edges.end(),
             [](const HalfEdge& x, const HalfEdge& y) { return x.key < y.key; });
+  UnionFind boundary_sets(num_vertices);
+  std::vector<char> on_boundary(num_vertices, 0);
   for (size_t i = 0; i < half_edges.size();) {
     size_t j = i;
     int forward = 0;
@@ -195,6 +197,10 @@ MeshCheckReport CheckMesh(const TriangleMesh& mesh, const MeshCheckOptions& opti
     if (count == 1) {
       ++report.boundary_edges;
       component.closed = false;
+      const int a = static_cast<int>(half_edges[i].key >> 32);
+      const int b = static_cast<int>(half_edges[i].key & 0xffffffffu);
+      boundary_sets.Union(a, b);
+      on_boundary[a] = on_boundary[b] = 1;
     } else if (count > 2) {
       ++report.nonmanifold_edges;
       component.closed = component.manifold = false;
@@ -203,6 +209,17 @@ MeshCheckReport CheckMesh(const TriangleMesh& mesh, const MeshCheckOptions& opti
       component.oriented = false;
     }
     i = j;
+  }
+
+  // Boundary loops: the cycle rank of the boundary edges' graph.
+  {
+    long boundary_vertices = 0, boundary_components = 0;
+    for (int v = 0; v < num_vertices; ++v) {
+      if (!on_boundary[v]) continue;
+      ++boundary_vertices;
+      if (boundary_sets.Find(v) == v) ++boundary_components;
+    }
+    report.boundary_loops = report.boundary_edges - boundary_vertices + boundary_components;
   }
 
   // Vertex links, over a vertex -> triangles table.
@@ -275,8 +292,8 @@ std::string MeshCheckReport::Summary() const {
   out << "V=" << vertices - unreferenced_vertices << " E=" << edges << " F=" << triangles
       << " chi=" << euler_characteristic << " components=" << components
       << " degenerate=" << degenerate_triangles << " duplicate=" << duplicate_triangles
-      << " boundary_edges=" << boundary_edges << " nonmanifold_edges=" << nonmanifold_edges
-      << " misoriented_edges=" << misoriented_edges
+      << " boundary_edges=" << boundary_edges << " boundary_loops=" << boundary_loops
+      << " nonmanifold_edges=" << nonmanifold_edges << " misoriented_edges=" << misoriented_edges
       << " vertices_link_not_cycle=" << vertices_link_not_cycle
       << " nonmanifold_vertices=" << nonmanifold_vertices << (ok ? " ok" : " NOT ok");
   return out.str();
@@ -289,6 +306,7 @@ std::string MeshCheckReport::ToText() const {
       << duplicate_triangles << ")\n"
       << "edges " << edges << " (boundary " << boundary_edges << ", in more than two triangles "
       << nonmanifold_edges << ", misoriented " << misoriented_edges << ")\n"
+      << "boundary loops " << boundary_loops << "\n"
       << "vertices whose link is not one cycle " << vertices_link_not_cycle
       << " (neither cycle nor path " << nonmanifold_vertices << ")\n"
       << "components " << components << " (closed " << closed_components << ")\n"
@@ -309,6 +327,7 @@ std::string MeshCheckReport::ToJson() const {
                          {"duplicate_triangles", duplicate_triangles},
                          {"edges", edges},
                          {"boundary_edges", boundary_edges},
+                         {"boundary_loops", boundary_loops},
                          {"nonmanifold_edges", nonmanifold_edges},
                          {"misoriented_edges", misoriented_edges},
                          {"vertices_link_not_cycle", vertices_link_not_cycle},

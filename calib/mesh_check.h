@@ -47,13 +47,16 @@ struct MeshCheckReport {
   long repeated_index_triangles = 0;  // of which repeat an index (left out of the topology)
   long edges = 0;                     // distinct undirected edges
   long boundary_edges = 0;            // in one triangle
-  long nonmanifold_edges = 0;         // in more than two triangles
-  long misoriented_edges = 0;         // in two triangles that use it in the same direction
-  long duplicate_triangles = 0;       // same vertex set as another triangle
-  long vertices_link_not_cycle = 0;   // referenced vertices whose link is not one cycle
-  long nonmanifold_vertices = 0;      // link neither one cycle nor one path
-  long components = 0;                // connected through shared vertices
-  long euler_characteristic = 0;      // V - E + F over referenced vertices
+  // The loops of boundary edges: the independent cycles of the graph of the boundary edges
+  // (its edges − vertices + components), one per hole of a 2-manifold with boundary.
+  long boundary_loops = 0;
+  long nonmanifold_edges = 0;        // in more than two triangles
+  long misoriented_edges = 0;        // in two triangles that use it in the same direction
+  long duplicate_triangles = 0;      // same vertex set as another triangle
+  long vertices_link_not_cycle = 0;  // referenced vertices whose link is not one cycle
+  long nonmanifold_vertices = 0;     // link neither one cycle nor one path
+  long components = 0;               // connected through shared vertices
+  long euler_characteristic = 0;     // V - E + F over referenced vertices
   long closed_components = 0;
   long genus = -1;  // sum over components when every one has a genus; else -1
   std::vector<MeshComponentReport> listed_components;  // largest first

@@ -447,6 +447,7 @@ TriangleMesh ReadPlyMesh(const std::filesystem::path& path) {
   TriangleMesh mesh;
   mesh.vertices = std::move(content.vertices);
   mesh.triangles = std::move(content.triangles);
+  mesh.colors = std::move(content.colors);
   return mesh;
 }
 
@@ -459,14 +460,27 @@ PointCloud ReadPlyPoints(const std::filesystem::path& path) {
 }
 
 void WritePlyMesh(const TriangleMesh& mesh, const std::filesystem::path& path) {
+  const bool has_colors = !mesh.colors.empty();
+  if (has_colors && mesh.colors.size() != mesh.vertices.size()) {
+    throw std::invalid_argument("WritePlyMesh: " + std::to_string(mesh.colors.size()) +
+                                " colours for " + std::to_string(mesh.vertices.size()) +
+                                " vertices");
+  }
   std::string out;
   out += "ply\nformat binary_little_endian 1.0\ncomment written by omnisculpt\n";
   out += "element vertex " + std::to_string(mesh.vertices.size()) + "\n";
   out += "property float x\nproperty float y\nproperty float z\n";
+  if (has_colors) out += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
   out += "element face " + std::to_string(mesh.triangles.size()) + "\n";
   out += "property list uchar int vertex_indices\nend_header\n";
-  out.reserve(out.size() + mesh.vertices.size() * 12 + mesh.triangles.size() * 13);
-  for (const Eigen::Vector3d& vertex : mesh.vertices) PutVertex(vertex, &out);
+  out.reserve(out.size() + mesh.vertices.size() * (has_colors ? 15 : 12) +
+              mesh.triangles.size() * 13);
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    PutVertex(mesh.vertices[i], &out);
+    if (has_colors) {
+      for (int c = 0; c < 3; ++c) PutLittleEndian(mesh.colors[i][c], &out);
+    }
+  }
   for (const Eigen::Vector3i& triangle : mesh.triangles) {
     PutLittleEndian(static_cast<uint8_t>(3), &out);
     for (int k = 0; k < 3; ++k) PutLittleEndian(static_cast<int32_t>(triangle[k]), &out);

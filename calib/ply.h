@@ -9,21 +9,25 @@
 
 namespace omni {
 
+using Rgb8 = Eigen::Matrix<uint8_t, 3, 1>;  // red, green, blue
+
 struct TriangleMesh {
   std::vector<Eigen::Vector3d> vertices;
   std::vector<Eigen::Vector3i> triangles;  // counter-clockwise seen from the side it faces
+  std::vector<Rgb8> colors;                // empty, or one per vertex
 };
 
 struct PointCloud {
   std::vector<Eigen::Vector3d> points;
-  std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;  // empty, or one per point
+  std::vector<Rgb8> colors;  // empty, or one per point
 };
 
 // Throws InputError naming the file on malformed input. Faces with more than three vertices
 // are split into fans.
 TriangleMesh ReadPlyMesh(const std::filesystem::path& path);
 PointCloud ReadPlyPoints(const std::filesystem::path& path);
-// Written atomically.
+// Written atomically, with red/green/blue uchar vertex properties when the mesh or the cloud
+// has colours (std::invalid_argument when their number is not that of the vertices).
 void WritePlyMesh(const TriangleMesh& mesh, const std::filesystem::path& path);
 void WritePlyPoints(const PointCloud& cloud, const std::filesystem::path& path);
 

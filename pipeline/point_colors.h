@@ -12,12 +12,11 @@
 #include <string>
 #include <vector>
 
+#include "calib/ply.h"
 #include "calib/rig.h"
 #include "sfm/tracker.h"
 
 namespace omni {
-
-using Rgb8 = Eigen::Matrix<uint8_t, 3, 1>;  // as PointCloud::colors
 
 struct PointColorOptions {
   // Colour of a point none of whose observations could be sampled (outside its image, or the

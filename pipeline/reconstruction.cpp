@@ -148,7 +148,8 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
       if (!sfm_error) {
         const auto busy = Clock::now();
         record(sculptor->Finish());
-        result.mesh = sculptor->ExtractMesh();
+        result.closed_mesh = sculptor->ExtractMesh(&result.closed_mesh_points);
+        result.mesh = sculptor->ExtractObservedMesh(&result.mesh_points, &result.observed);
         result.surface_seconds += SecondsSince(busy);
       }
     } catch (...) {

@@ -61,13 +61,20 @@ struct PipelineProgress {
 struct PipelineCallbacks {
   // From the calling thread, every progress_period seconds and once at the end.
   std::function<void(const PipelineProgress&)> progress;
-  // From the surface thread, after each multiple of snapshot_every sculpted keyframes.
+  // From the surface thread, after each multiple of snapshot_every sculpted keyframes (δO,
+  // closed).
   std::function<void(const KeyframeId& last_keyframe, const TriangleMesh& mesh)> snapshot;
 };
 
 struct PipelineResult {
   SfmRunResult sfm;  // keyframes (final poses and points), frame rows, loop closures, timings
+  // The observed surface (IncrementalSculptor::ExtractObservedMesh, surface.ply) and the closed
+  // δO (ExtractMesh, surface_closed.ply), with the point id of each vertex (ColorMeshVertices).
   TriangleMesh mesh;
+  std::vector<PointId> mesh_points;
+  TriangleMesh closed_mesh;
+  std::vector<PointId> closed_mesh_points;
+  ObservedMeshStats observed;
   std::vector<PipelineKeyframeRow> surface_rows;
   double seconds = 0.0, surface_seconds = 0.0;
   size_t queue_max_size = 0, queue_blocked_pushes = 0;

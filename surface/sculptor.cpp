@@ -51,7 +51,7 @@ std::string SculptorOptions::Check() const {
   if (grow_closure_rounds < 0) return "grow_closure_rounds must be >= 0";
   if (!(ray_grid_step_factor > 0.0)) return "ray_grid_step_factor must be > 0";
   // The parts' Check() name their fields with the prefix already ("genus.max_group_cells").
-  for (const std::string& problem : {genus.Check(), smoothing.Check()}) {
+  for (const std::string& problem : {genus.Check(), smoothing.Check(), observed.Check()}) {
     if (!problem.empty()) return problem;
   }
   return "";
@@ -144,6 +144,7 @@ class CounterQueue {
 };
 
 struct PointRecord {
+  PointId id;
   VertexHandle vertex;
   std::vector<Eigen::Vector3d> origins;
   uint32_t first_ray = 0;  // the rays of the point are first_ray, first_ray + 1, ... (ray ids)
@@ -1049,6 +1050,7 @@ struct IncrementalSculptor::Impl {
   int AddPoint(const SurfacePoint& p, VertexHandle v, KeyframeRecord& kf) {
     v = t.AddVertex(v, static_cast<int32_t>(points.size()), false);
     PointRecord rec;
+    rec.id = p.id;
     rec.vertex = v;
     rec.first_ray = static_cast<uint32_t>(ray_point.size());
     for (const SurfaceRay& ray : p.rays) {
@@ -1334,9 +1336,55 @@ std::vector<KeyframeStats> IncrementalSculptor::AddKeyframe(const SurfaceKeyfram
 
 std::vector<KeyframeStats> IncrementalSculptor::Finish() { return impl_->ProcessBuffered(); }
 
-TriangleMesh IncrementalSculptor::ExtractMesh() const {
-  if (impl_->options.smoothing.enabled) return impl_->smoother.Extract(impl_->t);  // step 6
-  return impl_->mesh.ExtractSurface();
+TriangleMesh IncrementalSculptor::ExtractMesh(std::vector<PointId>* vertex_points) const {
+  const Impl& m = *impl_;
+  if (!vertex_points) {
+    if (m.options.smoothing.enabled) return m.smoother.Extract(m.t);  // step 6
+    return m.mesh.ExtractSurface();
+  }
+  vertex_points->clear();
+  return internal::ExtractBorderOfO(m.t, [&](VertexHandle v) {
+    const int point = v->info().point;
+    vertex_points->push_back(point >= 0 ? m.points[point].id : PointId::Invalid());
+    return m.options.smoothing.enabled ? m.smoother.Position(v) : ToEigen(v->point());
+  });
+}
+
+TriangleMesh IncrementalSculptor::ExtractObservedMesh(std::vector<PointId>* vertex_points,
+                                                      ObservedMeshStats* stats) const {
+  const Impl& m = *impl_;
+  std::vector<int> records;  // per vertex of δO: its index in m.points, -1 for Steiner
+  const TriangleMesh closed = internal::ExtractBorderOfO(m.t, [&](VertexHandle v) {
+    records.push_back(v->info().point);
+    return m.options.smoothing.enabled ? m.smoother.Position(v) : ToEigen(v->point());
+  });
+  std::vector<ObservedVertex> vertices(records.size());
+  for (size_t i = 0; i < records.size(); ++i) {
+    if (records[i] >= 0) vertices[i].origins = &m.points[records[i]].origins;
+  }
+  std::vector<int> kept;
+  TriangleMesh observed =
+      SelectObservedMesh(closed, vertices, m.s, m.options.observed, &kept, stats);
+  if (vertex_points) {
+    vertex_points->clear();
+    for (int v : kept) vertex_points->push_back(m.points[records[v]].id);
+  }
+  return observed;
+}
+
+void ColorMeshVertices(const std::vector<PointId>& vertex_points,
+                       const std::unordered_map<PointId, Rgb8>& point_colors, TriangleMesh* mesh,
+                       uint8_t grey) {
+  if (vertex_points.size() != mesh->vertices.size()) {
+    throw std::invalid_argument("ColorMeshVertices: " + std::to_string(vertex_points.size()) +
+                                " point ids for " + std::to_string(mesh->vertices.size()) +
+                                " vertices");
+  }
+  mesh->colors.assign(mesh->vertices.size(), Rgb8(grey, grey, grey));
+  for (size_t v = 0; v < vertex_points.size(); ++v) {
+    const auto it = point_colors.find(vertex_points[v]);
+    if (it != point_colors.end()) mesh->colors[v] = it->second;
+  }
 }
 Eigen::Vector3d IncrementalSculptor::SurfacePosition(int vertex) const {
   return impl_->smoother.Position(impl_->t.vertices.at(vertex));

@@ -6,11 +6,13 @@
 #include <Eigen/Core>
 #include <memory>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "calib/ids.h"
 #include "calib/ply.h"
 #include "surface/delaunay.h"
+#include "surface/observed_mesh.h"
 
 namespace omni {
 
@@ -166,6 +168,8 @@ struct SculptorOptions {
   // Step 6 (paper §4.6).
   GenusRefinementOptions genus;
   SmoothingOptions smoothing;
+  // The observed part of δO (ExtractObservedMesh, surface.ply); the sculpting ignores it.
+  ObservedMeshOptions observed;
 
   std::string Check() const;
 };
@@ -232,6 +236,13 @@ struct KeyframeStats {
   size_t single_tests_skipped = 0, attempts_skipped = 0;
 };
 
+// Colours the vertices of a mesh of the sculptor (vertex_points from ExtractMesh or
+// ExtractObservedMesh): each vertex the colour of its point, `grey` for a Steiner vertex or a
+// point without a colour.
+void ColorMeshVertices(const std::vector<PointId>& vertex_points,
+                       const std::unordered_map<PointId, Rgb8>& point_colors, TriangleMesh* mesh,
+                       uint8_t grey = 128);
+
 std::string KeyframeStatsCsvHeader();
 std::string KeyframeStatsCsvRow(const KeyframeStats& stats);
 
@@ -246,9 +257,15 @@ class IncrementalSculptor {
   // Processes what is still buffered (a stream shorter than init_keyframes).
   std::vector<KeyframeStats> Finish();
 
-  // δO, triangles counter-clockwise seen from the free space; with smoothing, at the smoothed
-  // vertex positions.
-  TriangleMesh ExtractMesh() const;
+  // δO, the closed surface of the paper (surface_closed.ply): triangles counter-clockwise seen
+  // from the free space; with smoothing, at the smoothed vertex positions. vertex_points, when
+  // given, receives the point id of each vertex (PointId::Invalid() for a Steiner vertex).
+  TriangleMesh ExtractMesh(std::vector<PointId>* vertex_points = nullptr) const;
+  // The observed part of δO (surface.ply, surface/observed_mesh.h with options.observed): an
+  // oriented 2-manifold with boundary, its triangles a subset of ExtractMesh()'s, no Steiner
+  // vertex. vertex_points as for ExtractMesh.
+  TriangleMesh ExtractObservedMesh(std::vector<PointId>* vertex_points = nullptr,
+                                   ObservedMeshStats* stats = nullptr) const;
   // The output position of the Delaunay vertex (DelaunayMesh index): smoothed, or its own.
   Eigen::Vector3d SurfacePosition(int vertex) const;
   const DelaunayMesh& triangulation() const;

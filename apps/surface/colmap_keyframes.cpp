@@ -42,7 +42,8 @@ struct Image {
 
 }  // namespace
 
-std::vector<SurfaceKeyframe> LoadColmapKeyframes(const std::filesystem::path& model) {
+std::vector<SurfaceKeyframe> LoadColmapKeyframes(const std::filesystem::path& model,
+                                                 std::unordered_map<PointId, Rgb8>* point_colors) {
   if (!std::filesystem::exists(model / "cameras.txt")) {
     throw InputError(model / "cameras.txt", "", "cannot open (a COLMAP text model is expected)");
   }
@@ -104,6 +105,10 @@ std::vector<SurfaceKeyframe> LoadColmapKeyframes(const std::filesystem::path& mo
     SurfacePoint point;
     point.id = PointId(static_cast<uint32_t>(id));
     point.position = Eigen::Vector3d(x, y, z);
+    if (point_colors) {
+      auto channel = [](int value) { return static_cast<uint8_t>(std::clamp(value, 0, 255)); };
+      (*point_colors)[point.id] = Rgb8(channel(r), channel(g), channel(b));
+    }
     long image_id, index;
     size_t latest = 0;
     while (in >> image_id >> index) {

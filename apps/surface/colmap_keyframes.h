@@ -7,13 +7,16 @@
 // keyframes t' ≤ t) with one ray per observing image, starting at that camera's centre.
 
 #include <filesystem>
+#include <unordered_map>
 #include <vector>
 
 #include "surface/sculptor.h"
 
 namespace omni {
 
-// Throws InputError when a file is missing or malformed.
-std::vector<SurfaceKeyframe> LoadColmapKeyframes(const std::filesystem::path& model);
+// Throws InputError when a file is missing or malformed. point_colors, when given, receives the
+// R G B of each point of points3D.txt.
+std::vector<SurfaceKeyframe> LoadColmapKeyframes(
+    const std::filesystem::path& model, std::unordered_map<PointId, Rgb8>* point_colors = nullptr);
 
 }  // namespace omni

@@ -15,6 +15,7 @@
 #include "calib/error.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
+#include "pipeline/point_colors.h"
 #include "raycast/raycast.h"
 
 namespace omni {
@@ -247,7 +248,8 @@ std::vector<SurfaceKeyframe> MakeGtKeyframesAtCorners(const TriangleMesh& mesh, 
 std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
                                              const GtKeyframeOptions& options,
                                              TriangleMesh* gt_mesh,
-                                             std::vector<StampedPose>* keyframe_poses) {
+                                             std::vector<StampedPose>* keyframe_poses,
+                                             std::vector<size_t>* keyframe_frames) {
   const Rig rig = ReadRigJson(drive / "rig.json");
   const std::vector<StampedPose> poses = ReadTum(drive / "gt" / "poses.tum");
   if (poses.empty()) throw InputError(drive / "gt" / "poses.tum", "", "no pose");
@@ -307,7 +309,62 @@ std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
     }
   }
   if (gt_mesh) *gt_mesh = std::move(mesh);
+  if (keyframe_frames) keyframe_frames->assign(frames.begin(), frames.begin() + stream.size());
   return stream;
+}
+
+std::unordered_map<PointId, Rgb8> GtPointColors(const std::filesystem::path& drive,
+                                                const std::vector<SurfaceKeyframe>& stream,
+                                                const std::vector<size_t>& keyframe_frames) {
+  std::unordered_map<PointId, Rgb8> colors;
+  if (!std::filesystem::is_directory(drive / "images")) return colors;
+  const Drive images = Drive::Open(drive);
+  const std::vector<StampedPose> poses = ReadTum(drive / "gt" / "poses.tum");
+  if (images.NumFrames() != poses.size()) return colors;
+  const Rig& rig = images.rig();
+  // The keyframes as the SfM would hand them over: each ray of a point observed by the cameras
+  // of its keyframe in whose image the point falls.
+  std::unordered_map<uint32_t, size_t> index_of;  // KeyframeId value -> stream index
+  for (size_t t = 0; t < stream.size(); ++t) index_of[stream[t].id.value] = t;
+  std::vector<FinalizedKeyframe> keyframes(stream.size());
+  for (size_t t = 0; t < stream.size(); ++t) {
+    FinalizedKeyframe& keyframe = keyframes[t];
+    keyframe.keyframe = static_cast<int>(t);
+    keyframe.frame = static_cast<int>(keyframe_frames.at(t));
+    keyframe.world_from_rig = poses.at(keyframe_frames[t]).world_from_rig;
+  }
+  std::vector<PointId> ids;
+  for (size_t t = 0; t < stream.size(); ++t) {
+    for (const SurfacePoint& point : stream[t].points) {
+      FinalizedPoint finalized;
+      finalized.point = static_cast<int>(ids.size());
+      finalized.position = point.position;
+      for (const SurfaceRay& ray : point.rays) {
+        const auto k = index_of.find(ray.keyframe.value);
+        if (k == index_of.end()) continue;
+        const Rigid3d rig_from_world = keyframes[k->second].world_from_rig.Inverse();
+        for (size_t c = 0; c < rig.NumCameras(); ++c) {
+          const Camera& camera = rig.cameras[c];
+          const Eigen::Vector3d in_camera = camera.cam_from_rig * (rig_from_world * point.position);
+          Eigen::Vector2d pixel;
+          if (!camera.Project(in_camera.normalized(), &pixel) || !camera.IsInImage(pixel)) {
+            continue;
+          }
+          FinalizedRay observation;
+          observation.keyframe = static_cast<int>(k->second);
+          observation.camera = static_cast<int>(c);
+          observation.bearing = in_camera.normalized();
+          finalized.rays.push_back(observation);
+        }
+      }
+      keyframes[t].points.push_back(std::move(finalized));
+      ids.push_back(point.id);
+    }
+  }
+  const std::vector<Rgb8> point_colors = ColorPoints(
+      rig, keyframes, [&images](int frame, int camera) { return images.LoadRgb(frame, camera); });
+  for (size_t i = 0; i < ids.size(); ++i) colors[ids[i]] = point_colors[i];
+  return colors;
 }
 
 }  // namespace omni

@@ -18,6 +18,7 @@
 #include <functional>
 #include <opencv2/core.hpp>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "calib/ply.h"
@@ -87,9 +88,20 @@ std::vector<SurfaceKeyframe> MakeGtKeyframesAtCorners(const TriangleMesh& mesh, 
 // frame by frame gets the corner mode (images read with calib/drive.h), any other the uniform
 // mode. keyframe_poses, when given, receives the ground-truth pose of each
 // keyframe of the stream (what a perfect SfM would write as poses.tum).
+// keyframe_frames, when given, receives the drive frame of each keyframe.
 std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
                                              const GtKeyframeOptions& options,
                                              TriangleMesh* gt_mesh = nullptr,
-                                             std::vector<StampedPose>* keyframe_poses = nullptr);
+                                             std::vector<StampedPose>* keyframe_poses = nullptr,
+                                             std::vector<size_t>* keyframe_frames = nullptr);
+
+// The colour of each point of `stream` (LoadGtKeyframes of `drive`, at the drive frames
+// keyframe_frames) as a real SfM's points.ply has it (pipeline/point_colors.h): the mean of the
+// drive's RGB images at the pixels where the point projects, in every camera of the
+// ground-truth pose of each keyframe of its rays whose image it falls in. Empty when the drive
+// has no images matching gt/poses.tum.
+std::unordered_map<PointId, Rgb8> GtPointColors(const std::filesystem::path& drive,
+                                                const std::vector<SurfaceKeyframe>& stream,
+                                                const std::vector<size_t>& keyframe_frames);
 
 }  // namespace omni

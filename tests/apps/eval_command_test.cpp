@@ -42,6 +42,30 @@ TEST_F(EvalTest, CommandLine) {
   EXPECT_NE(output.find("\"nonmanifold_vertices\": 1"), std::string::npos) << output;
   EXPECT_EQ(RunOmnisculpt("mesh-check " + (root_ / "missing.ply").string(), &output), 2) << output;
 
+  // A sheet of 5 × 5 squares with two holes inside: a 2-manifold with boundary, accepted only
+  // when asked, with its three boundary loops (the rim and the two holes) counted.
+  TriangleMesh sheet;
+  for (int row = 0; row <= 5; ++row) {
+    for (int column = 0; column <= 5; ++column) sheet.vertices.emplace_back(column, row, 0.0);
+  }
+  for (int row = 0; row < 5; ++row) {
+    for (int column = 0; column < 5; ++column) {
+      if ((column == 1 && row == 1) || (column == 3 && row == 3)) continue;
+      const int a = row * 6 + column;
+      sheet.triangles.emplace_back(a, a + 1, a + 7);
+      sheet.triangles.emplace_back(a, a + 7, a + 6);
+    }
+  }
+  WritePlyMesh(sheet, root_ / "sheet.ply");
+  const std::string sheet_path = (root_ / "sheet.ply").string();
+  EXPECT_EQ(RunOmnisculpt("mesh-check " + sheet_path, &output), 1) << output;
+  EXPECT_EQ(RunOmnisculpt("mesh-check --allow-boundary " + sheet_path, &output), 0) << output;
+  EXPECT_NE(output.find("boundary loops 3\n"), std::string::npos) << output;
+  EXPECT_EQ(RunOmnisculpt("mesh-check --allow-boundary --json " + sheet_path, &output), 0)
+      << output;
+  EXPECT_NE(output.find("\"boundary_loops\": 3"), std::string::npos) << output;
+  EXPECT_NE(output.find("\"ok\": true"), std::string::npos) << output;
+
   EXPECT_EQ(RunOmnisculpt("render " + (drive_ / "gt" / "mesh.ply").string() +
                               " --bird --width 64 --out " + (root_ / "bird.png").string(),
                           &output),

@@ -33,6 +33,13 @@ using testing::ReadTextFile;
 using testing::RunOmnisculpt;
 using testing::SplitText;
 
+// surface.ply: an oriented 2-manifold with boundary.
+MeshCheckReport CheckBounded(const TriangleMesh& mesh) {
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  return CheckMesh(mesh, bounded);
+}
+
 fs::path ScratchDir(const std::string& name) {
   const fs::path dir = fs::path(OMNI_BINARY_DIR) / "test_scratch" / "reconstruct" / name;
   fs::remove_all(dir);
@@ -108,16 +115,27 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
   EXPECT_FALSE(fs::exists(fs::path(out.string() + ".incomplete")));
   EXPECT_FALSE(fs::exists(out / "INCOMPLETE"));
   // Every output of a drive folder's reconstruction (docs/design.md §4) that the pipeline writes.
-  for (const char* file :
-       {"poses.tum", "points.ply", "surface.ply", "reconstruct.json", "stats/keyframes.csv",
-        "stats/sfm_frames.csv", "sparse/cameras.txt", "sparse/images.txt", "sparse/points3D.txt"})
+  for (const char* file : {"poses.tum", "points.ply", "surface.ply", "surface_closed.ply",
+                           "reconstruct.json", "stats/keyframes.csv", "stats/sfm_frames.csv",
+                           "sparse/cameras.txt", "sparse/images.txt", "sparse/points3D.txt"})
     EXPECT_TRUE(fs::exists(out / file)) << file;
   EXPECT_FALSE(fs::is_empty(out / "snapshots"));
 
-  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
-  EXPECT_GT(mesh.triangles.size(), 1000u);
-  const MeshCheckReport check = CheckMesh(mesh);
+  // surface_closed.ply: δO, closed; surface.ply: its observed part, bounded, fewer triangles,
+  // both with a colour per vertex (grey: the synthetic city is grey).
+  const TriangleMesh closed = ReadPlyMesh(out / "surface_closed.ply");
+  EXPECT_GT(closed.triangles.size(), 1000u);
+  const MeshCheckReport check = CheckMesh(closed);
   EXPECT_TRUE(check.ok) << check.ToText();
+  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
+  EXPECT_GT(mesh.triangles.size(), closed.triangles.size() / 2);
+  EXPECT_LT(mesh.triangles.size(), closed.triangles.size());
+  const MeshCheckReport observed = CheckBounded(mesh);
+  EXPECT_TRUE(observed.ok) << observed.ToText();
+  EXPECT_GT(observed.boundary_loops, 0);
+  ASSERT_EQ(mesh.colors.size(), mesh.vertices.size());
+  ASSERT_EQ(closed.colors.size(), closed.vertices.size());
+  for (const Rgb8& color : mesh.colors) EXPECT_TRUE(color[0] == color[1] && color[1] == color[2]);
 
   const std::vector<StampedPose> poses = ReadTum(out / "poses.tum");
   const nlohmann::json summary = nlohmann::json::parse(ReadTextFile(out / "reconstruct.json"));
@@ -264,10 +282,12 @@ TEST(ReconstructShortDrive, TheBallEnclosingSetGivesAManifoldToo) {
   const nlohmann::json summary = nlohmann::json::parse(ReadTextFile(out / "reconstruct.json"));
   EXPECT_EQ(summary["enclosing"].get<std::string>(), "ball");
   EXPECT_TRUE(summary["manifold"].get<bool>());
-  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
+  EXPECT_TRUE(summary["closed_manifold"].get<bool>());
+  const TriangleMesh mesh = ReadPlyMesh(out / "surface_closed.ply");
   EXPECT_GT(mesh.triangles.size(), 1000u);
   const MeshCheckReport check = CheckMesh(mesh);
   EXPECT_TRUE(check.ok) << check.ToText();
+  EXPECT_TRUE(CheckBounded(ReadPlyMesh(out / "surface.ply")).ok);
   // The ball is what the keyframes used: it is never widened (the conflict zones are, on this
   // drive: ReconstructShortDrive.EveryStageRunsAndTheSurfaceIsAManifold).
   const std::vector<std::string> rows = SplitText(ReadTextFile(out / "stats" / "keyframes.csv"));
@@ -338,7 +358,8 @@ TEST(ReconstructShortDrive, ACorruptImageIsReportedAndItsFrameSkipped) {
     EXPECT_EQ(loaded[f], 1) << rows[f + 1];
     EXPECT_EQ(tracked[f], 1) << rows[f + 1];
   }
-  EXPECT_TRUE(CheckMesh(ReadPlyMesh(out / "surface.ply")).ok);
+  EXPECT_TRUE(CheckMesh(ReadPlyMesh(out / "surface_closed.ply")).ok);
+  EXPECT_TRUE(CheckBounded(ReadPlyMesh(out / "surface.ply")).ok);
 }
 
 // Registered start-to-end offset error: how far apart the first and last keyframes are,
@@ -409,9 +430,11 @@ TEST(ReconstructShortDrive, LoopClosureLowersThePoseErrorAndTheLoopMeets) {
   EXPECT_EQ(SplitText(rows.back(), ',').back(),
             std::to_string(summary["loop_closures"].size() + 1));
   EXPECT_EQ(SplitText(rows.back(), ',').at(1), "1");  // batch
-  const MeshCheckReport check = CheckMesh(ReadPlyMesh(with / "surface.ply"));
+  const MeshCheckReport check = CheckMesh(ReadPlyMesh(with / "surface_closed.ply"));
   EXPECT_TRUE(check.ok) << check.ToText();
+  EXPECT_TRUE(CheckBounded(ReadPlyMesh(with / "surface.ply")).ok);
   EXPECT_TRUE(summary["manifold"].get<bool>());
+  EXPECT_TRUE(summary["closed_manifold"].get<bool>());
   // The batch replay: the corrected keyframes handed over before the closure (all but the
   // local window, so more than the 40 of §5.1 and at most up to the revisit) in the first row
   // of the last sculpting, a batch row with all their points; then one row per keyframe.

@@ -226,7 +226,7 @@ TEST(SfmReconstructParityShortDrive, AnUnreadableFrameIsSkippedAndThePosesKeepTh
 // The global bundle adjustment when the drive ends: it runs, lowers the angular error of the
 // observations, and leaves the keyframes within 2 cm of the truth (measured 0.7-1.3 cm on the
 // short drive; its gain against --no-final-ba is within the SfM's run-to-run spread there,
-// docs/figures.md F11, so the test does not compare two runs).
+// docs/figures.md F12, so the test does not compare two runs).
 TEST(SfmReconstructParityShortDrive, TheFinalBundleAdjustmentRunsAndKeepsThePosesAccurate) {
   const fs::path scratch = ScratchDir("final_ba");
   const fs::path drive(OMNI_SHORT_DRIVE_DIR);

@@ -1,6 +1,7 @@
 // `omnisculpt surface --colmap`: a COLMAP text model written by hand (a rig of two
 // cameras driving through a closed room, points on its walls) is grouped into one keyframe per
-// rig frame, its tracks become rays, and the command sculpts a closed oriented 2-manifold.
+// rig frame, its tracks become rays, and the command sculpts a closed oriented 2-manifold
+// (surface_closed.ply) and its observed part (surface.ply), coloured by the model's RGB.
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
@@ -97,7 +98,9 @@ void WriteModel(const fs::path& folder, const std::vector<Observation>& points, 
   out.precision(17);
   for (size_t i = 0; i < points.size(); ++i) {
     const Eigen::Vector3d& p = points[i].position;
-    out << i + 1 << " " << p.x() << " " << p.y() << " " << p.z() << " 128 128 128 0.5";
+    // Each point's RGB from its index, so that the surfaces' vertex colours can be told apart.
+    out << i + 1 << " " << p.x() << " " << p.y() << " " << p.z() << " " << (i % 256) << " "
+        << ((i / 256) % 256) << " 77 0.5";
     for (const auto& [f, c] : points[i].track) out << " " << image_id(f, c) << " 0";
     out << "\n";
   }
@@ -157,10 +160,24 @@ TEST(ColmapKeyframes, SurfaceCommandSculptsAClosedManifoldFromAModel) {
   log << log_stream.rdbuf();
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << log.str();
   EXPECT_NE(log.str().find("surface: 10 keyframes"), std::string::npos) << log.str();
-  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
-  EXPECT_GT(mesh.triangles.size(), 200u);
-  const MeshCheckReport report = CheckMesh(mesh);
+  const TriangleMesh closed = ReadPlyMesh(out / "surface_closed.ply");
+  EXPECT_GT(closed.triangles.size(), 200u);
+  const MeshCheckReport report = CheckMesh(closed);
   EXPECT_TRUE(report.ok) << report.ToText();
+  // surface.ply: the observed part, bounded, its vertices coloured by points3D.txt's RGB (blue
+  // 77 for every point; the Steiner vertices of the closed one are grey).
+  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  const MeshCheckReport observed = CheckMesh(mesh, bounded);
+  EXPECT_TRUE(observed.ok) << observed.ToText();
+  EXPECT_GT(mesh.triangles.size(), 100u);
+  ASSERT_EQ(mesh.colors.size(), mesh.vertices.size());
+  for (const Rgb8& color : mesh.colors) EXPECT_EQ(color[2], 77);
+  ASSERT_EQ(closed.colors.size(), closed.vertices.size());
+  for (const Rgb8& color : closed.colors) {
+    EXPECT_TRUE(color[2] == 77 || color == Rgb8(128, 128, 128));
+  }
   fs::remove_all(dir);
 }
 

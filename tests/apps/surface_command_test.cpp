@@ -1,5 +1,7 @@
-// `omnisculpt surface --from-gt` end to end on a short tiny synthetic drive: the
-// surface is a closed oriented 2-manifold by the independent mesh checker of calib/,
+// `omnisculpt surface --from-gt` end to end on a short tiny synthetic drive: surface_closed.ply
+// is a closed oriented 2-manifold by the independent mesh checker of calib/, surface.ply an
+// oriented 2-manifold with boundary made of its triangles, of SfM points only, coloured as
+// points.ply,
 // stats/keyframes.csv has one row per keyframe with the documented columns, few points are
 // rejected, and a missing drive is one error line with exit code 2.
 
@@ -8,11 +10,14 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <regex>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -33,6 +38,35 @@ using testing::ReadTextFile;
 
 std::vector<std::string> Split(const std::string& text, char separator) {
   return testing::SplitText(text, separator);
+}
+
+// Every triangle of `part` is a triangle of `whole`, with the same orientation, its vertices at
+// the same positions.
+void ExpectTrianglesSubset(const TriangleMesh& part, const TriangleMesh& whole) {
+  auto key = [](const Eigen::Vector3d& v) { return std::array<double, 3>{v.x(), v.y(), v.z()}; };
+  std::map<std::array<double, 3>, int> whole_index;
+  for (size_t v = 0; v < whole.vertices.size(); ++v)
+    whole_index[key(whole.vertices[v])] = static_cast<int>(v);
+  std::set<std::array<int, 3>> whole_triangles;
+  auto canonical = [](int a, int b, int c) {
+    if (b < a && b < c) return std::array<int, 3>{b, c, a};
+    if (c < a && c < b) return std::array<int, 3>{c, a, b};
+    return std::array<int, 3>{a, b, c};
+  };
+  for (const Eigen::Vector3i& t : whole.triangles)
+    whole_triangles.insert(canonical(t[0], t[1], t[2]));
+  size_t missing = 0;
+  for (const Eigen::Vector3i& t : part.triangles) {
+    int w[3];
+    bool found = true;
+    for (int k = 0; k < 3; ++k) {
+      const auto it = whole_index.find(key(part.vertices[t[k]]));
+      found = found && it != whole_index.end();
+      w[k] = found ? it->second : -1;
+    }
+    missing += found && whole_triangles.count(canonical(w[0], w[1], w[2])) ? 0 : 1;
+  }
+  EXPECT_EQ(missing, 0u) << "of " << part.triangles.size();
 }
 
 class SurfaceCommandTest : public ::testing::Test {
@@ -81,13 +115,26 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
   const int keyframes = std::stoi(match[1]);
   EXPECT_GE(keyframes, 8);
 
-  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
-  EXPECT_GT(mesh.triangles.size(), 1000u);
-  const MeshCheckReport report = CheckMesh(mesh);
+  // surface_closed.ply: δO, a closed oriented 2-manifold.
+  const TriangleMesh closed = ReadPlyMesh(out / "surface_closed.ply");
+  EXPECT_GT(closed.triangles.size(), 1000u);
+  const MeshCheckReport report = CheckMesh(closed);
   EXPECT_TRUE(report.ok) << report.ToText();
   EXPECT_TRUE(report.closed_manifold);
   EXPECT_TRUE(report.oriented);
   EXPECT_EQ(report.boundary_edges, 0);
+  // surface.ply: its observed part, an oriented 2-manifold with boundary whose triangles are
+  // triangles of δO (the same vertex positions, written from the same floats).
+  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
+  EXPECT_GT(mesh.triangles.size(), closed.triangles.size() / 2);
+  EXPECT_LT(mesh.triangles.size(), closed.triangles.size());
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  const MeshCheckReport observed = CheckMesh(mesh, bounded);
+  EXPECT_TRUE(observed.ok) << observed.ToText();
+  EXPECT_GT(observed.boundary_loops, 0);
+  EXPECT_FALSE(CheckMesh(mesh).ok);  // not closed
+  ExpectTrianglesSubset(mesh, closed);
 
   const std::vector<std::string> lines = Split(ReadTextFile(out / "stats" / "keyframes.csv"), '\n');
   ASSERT_FALSE(lines.empty());
@@ -141,9 +188,9 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
   if (keyframes % 4 == 0) {
     EXPECT_EQ(ReadPlyMesh(out / "snapshots" / ("surface_" + std::to_string(last_id) + ".ply"))
                   .triangles.size(),
-              mesh.triangles.size());
+              closed.triangles.size());
   }
-  EXPECT_EQ(last_triangles, static_cast<long>(mesh.triangles.size()));
+  EXPECT_EQ(last_triangles, static_cast<long>(closed.triangles.size()));
   EXPECT_GT(added, 1000);
 
   // The rest of the reconstruction folder: one ground-truth pose per keyframe, taken from the
@@ -168,6 +215,64 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
   EXPECT_LT(rejected_share, 0.05);
 }
 
+// Without smoothing the vertices of the surfaces are the points where they lie: every vertex of
+// surface.ply is a point of points.ply (no Steiner vertex) and carries its colour (the mean of
+// the images where it is seen, tested in tests/pipeline/sfm_outputs_test.cpp); the vertices of
+// surface_closed.ply that are not points are Steiner vertices, grey (the street test of
+// tests/surface/observed_mesh_test.cpp checks that δO has some).
+TEST_F(SurfaceCommandTest, SurfaceVerticesArePointsWithTheirColours) {
+  const fs::path drive = dir_->path() / "drive_colours";
+  ASSERT_EQ(Run({"--quiet", "synth", "--preset", "tiny", "--frames", "10", "--out", drive.string()})
+                .exit_code,
+            0);
+  const fs::path out = dir_->path() / "colours";
+  const RunResult r = Run({"--quiet", "surface", "--from-gt", drive.string(), "--out", out.string(),
+                           "--no-smoothing", "--init-keyframes", "4"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  const PointCloud points = ReadPlyPoints(out / "points.ply");
+  ASSERT_EQ(points.colors.size(), points.points.size());
+  std::map<std::array<float, 3>, Rgb8> color_of;
+  auto key = [](const Eigen::Vector3d& v) {
+    return std::array<float, 3>{static_cast<float>(v.x()), static_cast<float>(v.y()),
+                                static_cast<float>(v.z())};
+  };
+  for (size_t i = 0; i < points.points.size(); ++i)
+    color_of[key(points.points[i])] = points.colors[i];
+  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
+  const TriangleMesh closed = ReadPlyMesh(out / "surface_closed.ply");
+  ASSERT_GT(mesh.triangles.size(), 100u);
+  ASSERT_EQ(mesh.colors.size(), mesh.vertices.size());
+  ASSERT_EQ(closed.colors.size(), closed.vertices.size());
+  size_t not_points = 0, wrong = 0, coloured = 0;
+  for (size_t v = 0; v < mesh.vertices.size(); ++v) {
+    const auto it = color_of.find(key(mesh.vertices[v]));
+    if (it == color_of.end()) {
+      ++not_points;
+      continue;
+    }
+    wrong += it->second == mesh.colors[v] ? 0 : 1;
+    // The synthetic city is grey, and stays grey, textured.
+    EXPECT_TRUE(mesh.colors[v][0] == mesh.colors[v][1] && mesh.colors[v][1] == mesh.colors[v][2]);
+    coloured += mesh.colors[v][0] != 128 ? 1 : 0;
+  }
+  EXPECT_EQ(not_points, 0u);
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_GT(coloured, mesh.vertices.size() / 2);  // sampled from the images, not the fallback
+  size_t steiner = 0;
+  for (size_t v = 0; v < closed.vertices.size(); ++v) {
+    const auto it = color_of.find(key(closed.vertices[v]));
+    if (it != color_of.end()) {
+      EXPECT_EQ(it->second, closed.colors[v]);
+      continue;
+    }
+    ++steiner;
+    EXPECT_EQ(closed.colors[v], Rgb8(128, 128, 128));
+  }
+  std::cout << "colours: " << mesh.vertices.size() << " observed vertices, " << steiner
+            << " Steiner vertices in the closed surface\n";
+  ExpectTrianglesSubset(mesh, closed);
+}
+
 // Step 6: --no-genus-refinement and --no-smoothing switch each part off on the same
 // stream. Smoothing moves vertices only (same triangles, same vertex count); without refinement
 // no group is added and F ∩ E outside O is left as step 5 made it; each output is a closed
@@ -190,9 +295,9 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
   const fs::path full = run("s6_full", {});
   const fs::path no_smooth = run("s6_no_smooth", {"--no-smoothing"});
   const fs::path none = run("s6_none", {"--no-smoothing", "--no-genus-refinement"});
-  const TriangleMesh m_full = ReadPlyMesh(full / "surface.ply");
-  const TriangleMesh m_no_smooth = ReadPlyMesh(no_smooth / "surface.ply");
-  const TriangleMesh m_none = ReadPlyMesh(none / "surface.ply");
+  const TriangleMesh m_full = ReadPlyMesh(full / "surface_closed.ply");
+  const TriangleMesh m_no_smooth = ReadPlyMesh(no_smooth / "surface_closed.ply");
+  const TriangleMesh m_none = ReadPlyMesh(none / "surface_closed.ply");
   for (const TriangleMesh* m : {&m_full, &m_no_smooth, &m_none}) {
     const MeshCheckReport report = CheckMesh(*m);
     EXPECT_TRUE(report.ok) << report.ToText();

@@ -6,7 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace omni {
 namespace {
@@ -17,6 +20,25 @@ TriangleMesh Tetrahedron() {
   tet.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
   return tet;
+}
+
+// A square sheet of n × n unit squares in the plane z = 0, two triangles each, counter-clockwise
+// seen from +z, without the squares listed in `holes` (column, row).
+TriangleMesh SheetWithHoles(int n, const std::vector<std::pair<int, int>>& holes) {
+  TriangleMesh sheet;
+  for (int row = 0; row <= n; ++row) {
+    for (int column = 0; column <= n; ++column) sheet.vertices.emplace_back(column, row, 0.0);
+  }
+  auto at = [n](int column, int row) { return row * (n + 1) + column; };
+  for (int row = 0; row < n; ++row) {
+    for (int column = 0; column < n; ++column) {
+      if (std::find(holes.begin(), holes.end(), std::make_pair(column, row)) != holes.end())
+        continue;
+      sheet.triangles.emplace_back(at(column, row), at(column + 1, row), at(column + 1, row + 1));
+      sheet.triangles.emplace_back(at(column, row), at(column + 1, row + 1), at(column, row + 1));
+    }
+  }
+  return sheet;
 }
 
 TEST(MeshCheck, ClosedTetrahedronIsOk) {
@@ -89,9 +111,31 @@ TEST(MeshCheck, BoundedMeshIsCountedWithItsBoundary) {
   const MeshCheckReport allowed = CheckMesh(cup, bounded);
   EXPECT_TRUE(allowed.ok) << allowed.Summary();
   EXPECT_EQ(allowed.boundary_edges, 3);
+  EXPECT_EQ(allowed.boundary_loops, 1);
+  EXPECT_EQ(CheckMesh(Tetrahedron()).boundary_loops, 0);
   // A boundary does not excuse a misoriented edge.
   std::swap(cup.triangles[0][1], cup.triangles[0][2]);
   EXPECT_FALSE(CheckMesh(cup, bounded).ok);
+}
+
+TEST(MeshCheck, BoundaryLoopsAreCountedOnePerHole) {
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  // The rim of the sheet and two holes apart from it and from each other: three loops.
+  const MeshCheckReport two_holes = CheckMesh(SheetWithHoles(5, {{1, 1}, {3, 2}}), bounded);
+  EXPECT_TRUE(two_holes.ok) << two_holes.Summary();
+  EXPECT_EQ(two_holes.boundary_edges, 5 * 4 + 4 + 4);
+  EXPECT_EQ(two_holes.boundary_loops, 3);
+  EXPECT_EQ(two_holes.euler_characteristic, 1 - 2);  // a disc with two holes
+  EXPECT_NE(two_holes.ToText().find("boundary loops 3\n"), std::string::npos) << two_holes.ToText();
+  EXPECT_NE(two_holes.ToJson().find("\"boundary_loops\": 3"), std::string::npos);
+  EXPECT_EQ(CheckMesh(SheetWithHoles(5, {}), bounded).boundary_loops, 1);
+  // Two holes that touch at a corner vertex: still two loops (the cycles of the boundary
+  // edges), but the shared vertex's link is two paths, so the sheet is no 2-manifold.
+  const MeshCheckReport pinched = CheckMesh(SheetWithHoles(5, {{1, 1}, {2, 2}}), bounded);
+  EXPECT_EQ(pinched.boundary_loops, 3);
+  EXPECT_EQ(pinched.nonmanifold_vertices, 1);
+  EXPECT_FALSE(pinched.ok);
 }
 
 TEST(MeshCheck, TwoTrianglesBackToBackAreDuplicatesAndNotOk) {

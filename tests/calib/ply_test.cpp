@@ -67,6 +67,31 @@ TEST(Ply, MeshRoundTrip) {
   const PointCloud cloud = ReadPlyPoints(path);
   EXPECT_EQ(cloud.points, read.vertices);
   EXPECT_TRUE(cloud.colors.empty());
+  EXPECT_TRUE(read.colors.empty());
+  EXPECT_EQ(ReadBytes(path).find("red"), std::string::npos);
+}
+
+TEST(Ply, ColouredMeshRoundTrip) {
+  TempDir dir;
+  TriangleMesh mesh;
+  mesh.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  mesh.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  mesh.colors = {Color(255, 0, 0), Color(0, 255, 0), Color(0, 0, 255), Color(12, 128, 201)};
+  const auto path = dir / "coloured.ply";
+  WritePlyMesh(mesh, path);
+  const std::string bytes = ReadBytes(path);
+  EXPECT_NE(bytes.find("property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                       "element face"),
+            std::string::npos);
+  const TriangleMesh read = ReadPlyMesh(path);
+  EXPECT_EQ(read.vertices, mesh.vertices);
+  EXPECT_EQ(read.triangles, mesh.triangles);
+  EXPECT_EQ(read.colors, mesh.colors);
+  // The vertices read as a point cloud keep their colours.
+  EXPECT_EQ(ReadPlyPoints(path).colors, mesh.colors);
+  // A colour list that does not match the vertices is a bug of the caller.
+  mesh.colors.pop_back();
+  EXPECT_THROW(WritePlyMesh(mesh, dir / "bad.ply"), std::invalid_argument);
 }
 
 TEST(Ply, ColouredPointsRoundTrip) {

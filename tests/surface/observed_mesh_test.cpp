@@ -1,0 +1,234 @@
+// The observed surface (surface/observed_mesh.h, IncrementalSculptor::ExtractObservedMesh): on
+// the street between two walls it has no Steiner vertex, no ceiling triangle and is an oriented
+// 2-manifold with boundary by the independent CheckMesh, its triangles a subset of the closed δO;
+// the repair of touching boundaries on hand-made sheets and on random subsets of δO.
+
+#include "surface/observed_mesh.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <map>
+#include <random>
+#include <set>
+#include <unordered_map>
+
+#include "calib/mesh_check.h"
+#include "surface/sculptor.h"
+#include "tests/surface/step6_scenes.h"
+
+namespace omni {
+namespace {
+
+MeshCheckOptions Bounded() {
+  MeshCheckOptions options;
+  options.allow_boundary = true;
+  return options;
+}
+
+// An oriented triangle up to rotation: its smallest index first.
+std::array<int, 3> Canonical(int a, int b, int c) {
+  if (b < a && b < c) return {b, c, a};
+  if (c < a && c < b) return {c, a, b};
+  return {a, b, c};
+}
+
+struct Street {
+  IncrementalSculptor sculptor;
+  explicit Street(const SculptorOptions& options) : sculptor(options) {
+    for (const SurfaceKeyframe& kf : testing::NoisyStreet(40, 100, 0.0, 11, 8.0, 10.0))
+      sculptor.AddKeyframe(kf);
+    sculptor.Finish();
+  }
+};
+
+SculptorOptions StreetOptions() {
+  SculptorOptions options;
+  options.init_keyframes = 10;
+  return options;
+}
+
+TEST(ObservedMesh, StreetHasNoSteinerVertexNoCeilingAndIsABoundedSubsetOfTheClosedSurface) {
+  const Street street(StreetOptions());
+  const IncrementalSculptor& sculptor = street.sculptor;
+  std::vector<PointId> closed_points, observed_points;
+  const TriangleMesh closed = sculptor.ExtractMesh(&closed_points);
+  ObservedMeshStats stats;
+  const TriangleMesh observed = sculptor.ExtractObservedMesh(&observed_points, &stats);
+
+  // The closed δO is still a closed oriented 2-manifold, and has Steiner vertices.
+  const MeshCheckReport closed_report = CheckMesh(closed);
+  EXPECT_TRUE(closed_report.ok) << closed_report.Summary();
+  ASSERT_EQ(closed_points.size(), closed.vertices.size());
+  EXPECT_TRUE(std::any_of(closed_points.begin(), closed_points.end(),
+                          [](PointId id) { return !id.IsValid(); }));
+  // The same δO without vertex ids.
+  EXPECT_EQ(sculptor.ExtractMesh().triangles, closed.triangles);
+
+  // The observed mesh: a 2-manifold with boundary, oriented, of point vertices only.
+  const MeshCheckReport report = CheckMesh(observed, Bounded());
+  EXPECT_TRUE(report.ok) << report.Summary();
+  EXPECT_FALSE(report.closed_manifold);
+  EXPECT_GT(report.boundary_loops, 0);
+  EXPECT_GT(observed.triangles.size(), closed.triangles.size() / 2);
+  EXPECT_LT(observed.triangles.size(), closed.triangles.size());
+  ASSERT_EQ(observed_points.size(), observed.vertices.size());
+  for (PointId id : observed_points) EXPECT_TRUE(id.IsValid());
+  EXPECT_EQ(stats.closed_triangles, closed.triangles.size());
+  EXPECT_EQ(stats.triangles, observed.triangles.size());
+  EXPECT_EQ(stats.closed_triangles, stats.triangles + stats.steiner + stats.long_edges +
+                                        stats.sparse + stats.unseen + stats.manifold_repair +
+                                        stats.small_components);
+  EXPECT_GT(stats.steiner, 0u);
+
+  // Its triangles, oriented as they are, are triangles of δO at the same positions.
+  std::unordered_map<uint32_t, int> closed_index;
+  for (size_t v = 0; v < closed_points.size(); ++v) {
+    if (closed_points[v].IsValid()) closed_index[closed_points[v].value] = static_cast<int>(v);
+  }
+  std::set<std::array<int, 3>> closed_triangles;
+  for (const Eigen::Vector3i& t : closed.triangles)
+    closed_triangles.insert(Canonical(t[0], t[1], t[2]));
+  for (size_t v = 0; v < observed.vertices.size(); ++v) {
+    const int c = closed_index.at(observed_points[v].value);
+    EXPECT_EQ(observed.vertices[v], closed.vertices[c]);
+  }
+  for (const Eigen::Vector3i& t : observed.triangles) {
+    const int a = closed_index.at(observed_points[t[0]].value);
+    const int b = closed_index.at(observed_points[t[1]].value);
+    const int c = closed_index.at(observed_points[t[2]].value);
+    EXPECT_TRUE(closed_triangles.count(Canonical(a, b, c))) << a << " " << b << " " << c;
+  }
+
+  // The ceiling over the street (between the wall tops, 16 m apart) and the caps at its ends
+  // are left out: no edge longer than max_edge_factor · s, all of them facing a ray centre.
+  const double max_edge = SculptorOptions().observed.max_edge_factor * sculptor.scale();
+  size_t long_closed = 0;
+  for (const Eigen::Vector3i& t : closed.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      long_closed += (closed.vertices[t[k]] - closed.vertices[t[(k + 1) % 3]]).norm() > 8.0;
+    }
+  }
+  EXPECT_GT(long_closed, 0u);
+  for (const Eigen::Vector3i& t : observed.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_LE((observed.vertices[t[k]] - observed.vertices[t[(k + 1) % 3]]).norm(), max_edge);
+    }
+  }
+
+  // Without any filter but the Steiner vertices it is still a bounded manifold subset.
+  SculptorOptions loose = StreetOptions();
+  loose.observed.max_edge_factor = 0.0;
+  loose.observed.require_seen = false;
+  const Street loose_street(loose);
+  const TriangleMesh loose_mesh = loose_street.sculptor.ExtractObservedMesh();
+  EXPECT_TRUE(CheckMesh(loose_mesh, Bounded()).ok) << CheckMesh(loose_mesh, Bounded()).Summary();
+  EXPECT_GT(loose_mesh.triangles.size(), observed.triangles.size());
+}
+
+// A sheet of n × n unit squares, two triangles each, without the squares in `holes`.
+std::vector<Eigen::Vector3i> Sheet(int n, const std::vector<std::pair<int, int>>& holes) {
+  std::vector<Eigen::Vector3i> triangles;
+  for (int row = 0; row < n; ++row) {
+    for (int column = 0; column < n; ++column) {
+      if (std::find(holes.begin(), holes.end(), std::make_pair(column, row)) != holes.end())
+        continue;
+      const int a = row * (n + 1) + column;
+      triangles.emplace_back(a, a + 1, a + n + 2);
+      triangles.emplace_back(a, a + n + 2, a + n + 1);
+    }
+  }
+  return triangles;
+}
+
+TriangleMesh SheetMesh(int n, const std::vector<Eigen::Vector3i>& triangles) {
+  TriangleMesh mesh;
+  for (int row = 0; row <= n; ++row) {
+    for (int column = 0; column <= n; ++column) mesh.vertices.emplace_back(column, row, 0.0);
+  }
+  mesh.triangles = triangles;
+  return mesh;
+}
+
+TEST(ObservedMesh, RepairDropsTheSmallerFanWhereTwoHolesTouch) {
+  // Holes (1, 1) and (2, 2) touch at the vertex (2, 2): its link is two paths of one triangle.
+  std::vector<Eigen::Vector3i> triangles = Sheet(5, {{1, 1}, {2, 2}});
+  EXPECT_FALSE(CheckMesh(SheetMesh(5, triangles), Bounded()).ok);
+  const size_t before = triangles.size();
+  const size_t dropped = RepairTouchingBoundaries(&triangles, 36);
+  EXPECT_EQ(dropped, 1u);
+  EXPECT_EQ(triangles.size(), before - 1);
+  const MeshCheckReport report = CheckMesh(SheetMesh(5, triangles), Bounded());
+  EXPECT_TRUE(report.ok) << report.Summary();
+  EXPECT_EQ(report.boundary_loops, 2);  // the rim, and the two holes become one
+  // A manifold with boundary is left as it is.
+  std::vector<Eigen::Vector3i> apart = Sheet(5, {{1, 1}, {3, 3}});
+  const std::vector<Eigen::Vector3i> copy = apart;
+  EXPECT_EQ(RepairTouchingBoundaries(&apart, 36), 0u);
+  EXPECT_EQ(apart, copy);
+}
+
+TEST(ObservedMesh, RepairMakesAnyTriangleSubsetOfTheClosedSurfaceABoundedManifold) {
+  SculptorOptions options = StreetOptions();
+  const Street street(options);
+  const TriangleMesh closed = street.sculptor.ExtractMesh();
+  ASSERT_TRUE(CheckMesh(closed).ok);
+  std::mt19937 rng(5);
+  for (double keep : {0.95, 0.7, 0.4}) {
+    SCOPED_TRACE(keep);
+    std::bernoulli_distribution kept(keep);
+    TriangleMesh subset = closed;
+    subset.triangles.clear();
+    for (const Eigen::Vector3i& t : closed.triangles) {
+      if (kept(rng)) subset.triangles.push_back(t);
+    }
+    const size_t before = subset.triangles.size();
+    const MeshCheckReport broken = CheckMesh(subset, Bounded());
+    EXPECT_GT(broken.nonmanifold_vertices, 0);
+    const size_t dropped = RepairTouchingBoundaries(&subset.triangles, subset.vertices.size());
+    EXPECT_EQ(subset.triangles.size(), before - dropped);
+    MeshCheckOptions bounded = Bounded();
+    bounded.allow_empty = true;
+    const MeshCheckReport report = CheckMesh(subset, bounded);
+    EXPECT_TRUE(report.ok) << report.Summary();
+    // Fewer triangles go than there were bad vertices times their valence.
+    EXPECT_LT(dropped, before / 2);
+  }
+}
+
+TEST(ObservedMesh, ColorMeshVerticesGivesEachVertexItsPointsColourAndSteinerGrey) {
+  TriangleMesh mesh;
+  mesh.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  mesh.triangles = {{0, 1, 2}};
+  const std::vector<PointId> points = {PointId(7), PointId::Invalid(), PointId(9)};
+  const std::unordered_map<PointId, Rgb8> colors = {{PointId(7), Rgb8(200, 10, 30)}};
+  ColorMeshVertices(points, colors, &mesh);
+  ASSERT_EQ(mesh.colors.size(), 3u);
+  EXPECT_EQ(mesh.colors[0], Rgb8(200, 10, 30));
+  EXPECT_EQ(mesh.colors[1], Rgb8(128, 128, 128));  // Steiner
+  EXPECT_EQ(mesh.colors[2], Rgb8(128, 128, 128));  // no colour known
+  EXPECT_THROW(ColorMeshVertices({PointId(7)}, colors, &mesh), std::invalid_argument);
+}
+
+TEST(ObservedMeshOptions, CheckRejectsBadValues) {
+  EXPECT_EQ(ObservedMeshOptions().Check(), "");
+  ObservedMeshOptions o;
+  o.max_edge_factor = -1.0;
+  EXPECT_NE(o.Check().find("observed.max_edge_factor"), std::string::npos);
+  o = {};
+  o.max_spacing_factor = -0.5;
+  EXPECT_NE(o.Check().find("observed.max_spacing_factor"), std::string::npos);
+  o = {};
+  o.min_view_cosine = 1.0;
+  EXPECT_NE(o.Check().find("observed.min_view_cosine"), std::string::npos);
+  o = {};
+  o.min_component_triangles = -1;
+  EXPECT_NE(o.Check().find("observed.min_component_triangles"), std::string::npos);
+  SculptorOptions sculptor;
+  sculptor.observed.max_edge_factor = -1.0;
+  EXPECT_NE(sculptor.Check().find("observed.max_edge_factor"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace omni

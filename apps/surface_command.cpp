@@ -16,8 +16,8 @@
 #include <vector>
 
 #include "apps/commands.h"
-#include "apps/surface/colmap_keyframes.h"
-#include "apps/surface/gt_keyframes.h"
+#include "pipeline/colmap_keyframes.h"
+#include "pipeline/gt_keyframes.h"
 #include "calib/atomic_file.h"
 #include "calib/error.h"
 #include "calib/mesh_check.h"

@@ -14,7 +14,7 @@ set(layer_surface  calib surface)                     # omni_surface (sfm's sibl
 set(layer_raycast  calib raycast)                     # omni_raycast
 set(layer_eval     calib raycast surface eval)        # omni_eval
 set(layer_synth    calib raycast synth)               # omni_synth
-set(layer_pipeline calib sfm surface pipeline)        # omni_pipeline, the controllers
+set(layer_pipeline calib sfm surface raycast pipeline)  # omni_pipeline, the controllers
 set(layer_apps     calib sfm surface raycast eval synth pipeline apps)  # the command line
 # -------------------------------------------------------------------------------------------------
 

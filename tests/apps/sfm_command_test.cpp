@@ -1,7 +1,7 @@
 // `omnisculpt sfm` end to end on the short synthetic drive (fixture short_drive):
 // every frame tracked, the keyframe trajectory within 1 % of the distance driven after
 // similarity registration to the ground truth, the points on the ground-truth surface, the
-// outputs present, and the COLMAP text model read back by apps/surface/colmap_keyframes; bad
+// outputs present, and the COLMAP text model read back by pipeline/colmap_keyframes; bad
 // arguments are one error line with exit code 2.
 
 #include <gtest/gtest.h>
@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "apps/surface/colmap_keyframes.h"
+#include "pipeline/colmap_keyframes.h"
 #include "calib/ply.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"

@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "apps/surface/colmap_keyframes.h"
+#include "pipeline/colmap_keyframes.h"
 #include "calib/error.h"
 #include "calib/mesh_check.h"
 #include "calib/ply.h"

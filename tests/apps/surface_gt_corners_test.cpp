@@ -1,4 +1,4 @@
-// --from-gt's corner mode (apps/surface/gt_keyframes.h): on a tiny synthetic drive with
+// --from-gt's corner mode (pipeline/gt_keyframes.h): on a tiny synthetic drive with
 // images, the points of a keyframe lie on the ground-truth mesh, project within a pixel of a
 // Harris corner detected (independently, here) in one of the keyframe's images, number as many
 // as asked, keep the rules of the simulated SfM (rays from earlier keyframes, no two points of
@@ -11,7 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "apps/default_rig.h"
-#include "apps/surface/gt_keyframes.h"
+#include "pipeline/gt_keyframes.h"
 #include "calib/drive.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"

@@ -1,11 +1,11 @@
-// --from-gt's pose noise (apps/surface/gt_keyframes.h): none gives the exact keyframe centres
+// --from-gt's pose noise (pipeline/gt_keyframes.h): none gives the exact keyframe centres
 // and ray origins; σ gives an RMS centre deviation near σ√3, the rays of a keyframe moved with
 // its centre, and the same points as without noise.
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "apps/surface/gt_keyframes.h"
+#include "pipeline/gt_keyframes.h"
 
 namespace omni {
 namespace {

@@ -15,7 +15,7 @@
 #include <numeric>
 #include <string>
 
-#include "apps/surface/gt_keyframes.h"
+#include "pipeline/gt_keyframes.h"
 #include "calib/mesh_check.h"
 #include "surface/sculptor.h"
 

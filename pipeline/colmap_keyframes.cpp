@@ -1,4 +1,4 @@
-#include "apps/surface/colmap_keyframes.h"
+#include "pipeline/colmap_keyframes.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>

@@ -1,4 +1,4 @@
-#include "apps/surface/gt_keyframes.h"
+#include "pipeline/gt_keyframes.h"
 
 #include <spdlog/spdlog.h>
 

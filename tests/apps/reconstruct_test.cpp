@@ -23,12 +23,14 @@
 #include "eval/pose_eval.h"
 #include "surface/sculptor.h"
 #include "tests/apps/point_colors_check.h"
+#include "tests/apps/reconstruction_checks.h"
 #include "tests/apps/run_omnisculpt.h"
 
 namespace omni {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::PoseRms;
 using testing::ReadTextFile;
 using testing::RunOmnisculpt;
 using testing::SplitText;
@@ -40,12 +42,7 @@ MeshCheckReport CheckBounded(const TriangleMesh& mesh) {
   return CheckMesh(mesh, bounded);
 }
 
-fs::path ScratchDir(const std::string& name) {
-  const fs::path dir = fs::path(OMNI_BINARY_DIR) / "test_scratch" / "reconstruct" / name;
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
+fs::path ScratchDir(const std::string& name) { return testing::ScratchDir("reconstruct", name); }
 
 TEST(ReconstructCommand, RefusesAMissingOutAndABadDrive) {
   const fs::path scratch = ScratchDir("bad_input");
@@ -97,11 +94,6 @@ std::vector<int> IntColumn(const std::vector<std::string>& rows, const std::stri
   for (size_t r = 1; r < rows.size(); ++r)
     values.push_back(std::stoi(SplitText(rows[r], ',').at(column)));
   return values;
-}
-
-double PoseRms(const fs::path& rec, const fs::path& drive) {
-  return EvaluatePoses(ReadTum(rec / "poses.tum"), ReadTum(drive / "gt" / "poses.tum"))
-      .registration_rms;
 }
 
 TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {

@@ -20,24 +20,21 @@
 
 #include "calib/tum.h"
 #include "eval/pose_eval.h"
+#include "tests/apps/reconstruction_checks.h"
 #include "tests/apps/run_omnisculpt.h"
 
 namespace omni {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::PoseRms;
 using testing::ReadTextFile;
 using testing::RunOmnisculpt;
 using testing::SplitText;
 
 constexpr int kExitNotUsable = 3;  // apps/commands.h
 
-fs::path ScratchDir(const std::string& name) {
-  const fs::path dir = fs::path(OMNI_BINARY_DIR) / "test_scratch" / "sfm_parity" / name;
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
+fs::path ScratchDir(const std::string& name) { return testing::ScratchDir("sfm_parity", name); }
 
 // How a drive is cut from the short drive.
 struct Cut {
@@ -121,11 +118,6 @@ FramesCsv ReadFramesCsv(const fs::path& out) {
   csv.header = SplitText(lines[0], ',');
   for (size_t i = 1; i < lines.size(); ++i) csv.rows.push_back(SplitText(lines[i], ','));
   return csv;
-}
-
-double PoseRms(const fs::path& out, const fs::path& drive) {
-  return EvaluatePoses(ReadTum(out / "poses.tum"), ReadTum(drive / "gt" / "poses.tum"))
-      .registration_rms;
 }
 
 // Runs both commands on `drive`; checks that they agree frame by frame and exit alike (0, or

@@ -22,6 +22,7 @@
 #include "calib/rig_report.h"
 #include "calib/tum.h"
 #include "synth/drive_writer.h"
+#include "tests/calib/io_temp_dir.h"
 
 namespace omni::synth {
 namespace {
@@ -36,12 +37,7 @@ fs::path TempFolder(const std::string& name) {
   return path;
 }
 
-std::string ReadBytes(const fs::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  std::ostringstream bytes;
-  bytes << stream.rdbuf();
-  return bytes.str();
-}
+using omni::testing::ReadBytes;  // tests/calib/io_temp_dir.h
 
 SynthWriteOptions Quiet() {
   SynthWriteOptions write_options;

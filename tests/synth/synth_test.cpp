@@ -26,6 +26,7 @@
 #include "raycast/raycast.h"
 #include "synth/drive_writer.h"
 #include "synth/renderer.h"
+#include "tests/calib/io_temp_dir.h"
 
 namespace omni::synth {
 namespace {
@@ -43,12 +44,7 @@ fs::path TempFolder(const std::string& name) {
   return path;
 }
 
-std::string ReadBytes(const fs::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  std::ostringstream bytes;
-  bytes << stream.rdbuf();
-  return bytes.str();
-}
+using omni::testing::ReadBytes;  // tests/calib/io_temp_dir.h
 
 // Relative path -> bytes of every file under `folder`.
 std::map<std::string, std::string> ReadTree(const fs::path& folder) {

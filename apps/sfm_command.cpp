@@ -37,9 +37,7 @@ void RunSfmCommand(SfmCommandOptions& o, const GlobalOptions& global) {
                drive.NumFrames(), rig.NumCameras(),
                o.sfm.sfm.tracker.central ? "central" : "non-central", rig.MaxCenterOffset());
 
-  const size_t num_frames = o.sfm.sfm.max_frames > 0
-                                ? std::min<size_t>(drive.NumFrames(), o.sfm.sfm.max_frames)
-                                : drive.NumFrames();
+  const size_t num_frames = SfmFramesToRun(o.sfm.sfm, drive.NumFrames());
   SfmRunnerCallbacks callbacks;
   auto last_progress = std::chrono::steady_clock::now();
   const auto start = last_progress;

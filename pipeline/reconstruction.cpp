@@ -71,9 +71,7 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
   ThrowIfInvalid(options.Check(), "PipelineOptions");
   PipelineResult result;
   const SfmFrameSource source = DriveFrameSource(drive);
-  const size_t frames_total = options.sfm.max_frames > 0
-                                  ? std::min<size_t>(source.num_frames, options.sfm.max_frames)
-                                  : source.num_frames;
+  const size_t frames_total = SfmFramesToRun(options.sfm, source.num_frames);
   BoundedQueue<QueuedKeyframe> queue(static_cast<size_t>(options.queue_capacity));
   std::atomic<size_t> frames_done{0}, keyframes_sculpted{0}, triangles{0};
   std::atomic<int> num_keyframes{0}, num_points{0};

@@ -6,6 +6,7 @@
 #include <malloc.h>
 #endif
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -68,6 +69,10 @@ const char* SfmOutcomeName(SfmOutcome outcome) {
   return "unknown";
 }
 
+size_t SfmFramesToRun(const SfmRunnerOptions& options, size_t input_frames) {
+  return options.max_frames > 0 ? std::min<size_t>(input_frames, options.max_frames) : input_frames;
+}
+
 void ConfigureAllocatorForSfm() {
 #ifdef __GLIBC__
   static std::once_flag once;
@@ -116,6 +121,15 @@ struct SfmRunner::Impl {
       if (callbacks.keyframe_finalised) callbacks.keyframe_finalised(keyframe);
       result.keyframes.push_back(std::move(keyframe));
     }
+  }
+
+  // After a correction of the map (a loop closure, the final adjustment): every finalised
+  // keyframe rebuilt from the corrected map, handed over again.
+  void HandOverCorrectedMap() {
+    result.keyframes = tracker.FinalizedSnapshot();
+    for (FinalizedKeyframe& keyframe : result.keyframes)
+      keyframe.frame = InputFrame(keyframe.frame);
+    if (callbacks.map_corrected) callbacks.map_corrected(result.keyframes);
   }
 
   const Rig& rig;
@@ -192,10 +206,7 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
           closure.correction_rotation_deg =
               poses_after[k].rotation.angularDistance(poses_before[k].rotation) * 180.0 / M_PI;
         result.loop_closures.push_back(closure);
-        result.keyframes = s.tracker.FinalizedSnapshot();
-        for (FinalizedKeyframe& keyframe : result.keyframes)
-          keyframe.frame = s.InputFrame(keyframe.frame);
-        if (s.callbacks.map_corrected) s.callbacks.map_corrected(result.keyframes);
+        s.HandOverCorrectedMap();
       }
     }
   }
@@ -222,10 +233,7 @@ SfmRunResult SfmRunner::Finish() {
     if (summary.success) {
       result.final_rms_angle_before = summary.rms_angle_before;
       result.final_rms_angle_after = summary.rms_angle_after;
-      result.keyframes = s.tracker.FinalizedSnapshot();
-      for (FinalizedKeyframe& keyframe : result.keyframes)
-        keyframe.frame = s.InputFrame(keyframe.frame);
-      if (s.callbacks.map_corrected) s.callbacks.map_corrected(result.keyframes);
+      s.HandOverCorrectedMap();
       spdlog::info(
           "sfm: final bundle adjustment of {} keyframes in {:.2f} s: RMS angle {:.4f} -> "
           "{:.4f} degrees",
@@ -273,9 +281,7 @@ SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunne
                     const SfmRunnerCallbacks& callbacks) {
   ConfigureAllocatorForSfm();
   SfmRunner runner(rig, options, callbacks);
-  const size_t num_frames = options.max_frames > 0
-                                ? std::min<size_t>(source.num_frames, options.max_frames)
-                                : source.num_frames;
+  const size_t num_frames = SfmFramesToRun(options, source.num_frames);
   bool stopped = false;
   {
     // Stopped and joined when this scope ends (a stop, an error, or the last frame).

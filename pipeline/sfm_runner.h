@@ -152,6 +152,9 @@ class SfmRunner {
   std::unique_ptr<Impl> impl_;
 };
 
+// The frames a run over an input of `input_frames` frames reads (max_frames applied).
+size_t SfmFramesToRun(const SfmRunnerOptions& options, size_t input_frames);
+
 // Runs the SfM over every frame of `source` (max_frames applied), the images decoded ahead on
 // their own thread. Stopped early by callbacks.stop (the result then holds what was done).
 SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunnerOptions& options,

@@ -280,7 +280,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
 
   std::string written;
   if (!result.closed_mesh.triangles.empty()) written += "surface.ply, surface_closed.ply, ";
-  if (sfm.outcome != SfmOutcome::kNotInitialised) written += "points.ply, poses.tum, sparse/, ";
+  if (sfm.outcome != SfmOutcome::kNotInitialised) written += "points.ply, poses.tum, frame_poses.tum, sparse/, ";
   written += std::string("stats/, ") + kSummaryFile;
   std::printf(
       "reconstruct: %zu frames (%zu skipped, %zu not tracked) in %.1f s (%.1f frames/s), %zu "

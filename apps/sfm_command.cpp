@@ -1,8 +1,8 @@
 // `omnisculpt sfm DRIVE --out OUT [--central|--non-central]`: the incremental rig SfM
 // (pipeline/sfm_runner.h, the loop `reconstruct` runs too) on a drive's images, writing the
-// keyframe poses (poses.tum), the points (points.ply), a COLMAP text model (sparse/), one row
-// per frame (stats/sfm_frames.csv), the time per stage (stats/sfm_stages.csv) and a summary
-// (stats/sfm_summary.csv), by pipeline/sfm_outputs.h.
+// keyframe poses (poses.tum; every tracked frame in frame_poses.tum), the points (points.ply), a
+// COLMAP text model (sparse/), one row per frame (stats/sfm_frames.csv), the time per stage
+// (stats/sfm_stages.csv) and a summary (stats/sfm_summary.csv), by pipeline/sfm_outputs.h.
 
 #include <spdlog/spdlog.h>
 

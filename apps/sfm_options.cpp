@@ -2,9 +2,11 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "calib/error.h"
+#include "sfm/harris.h"
 
 namespace omni {
 
@@ -12,8 +14,9 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
   command->add_flag("--central", o->central, "Central approximation (default: rig.json)");
   command->add_flag("--non-central", o->non_central, "True camera offsets (default: rig.json)");
   command
-      ->add_option("--downscale", o->sfm.tracks.harris.downscale,
-                   "Shrink the images by this factor before detection (paper: 2)")
+      ->add_option("--downscale", o->downscale,
+                   "Shrink the images by this factor before detection (paper: 2; default 0: "
+                   "from the image size, the longest side to about 640 pixels)")
       ->capture_default_str();
   command->add_option("--corners", o->sfm.tracks.harris.max_corners, "Harris corners per image")
       ->capture_default_str();
@@ -51,7 +54,23 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
     throw InputError("", "--frame-rate", "expected a positive rate");
   if (o->sfm.max_frames < 0) throw InputError("", "--max-frames", "expected 0 or a positive count");
   if (!(o->scene_depth > 0.0)) throw InputError("", "--scene-depth", "expected a positive depth");
+  if (!(o->downscale >= 0.0) || !std::isfinite(o->downscale))
+    throw InputError("", "--downscale",
+                     "expected 0 (from the image size) or a factor of 1 or more");
   o->sfm.tracker.central = o->central ? true : o->non_central ? false : rig.central;
+  if (o->downscale > 0.0) {
+    o->sfm.tracks.harris.downscale = o->downscale;
+  } else {
+    int width = 0, height = 0;
+    for (const Camera& camera : rig.cameras) {
+      width = std::max(width, camera.width);
+      height = std::max(height, camera.height);
+    }
+    o->sfm.tracks.harris.downscale = WorkingDownscale(width, height);
+    if (o->sfm.tracks.harris.downscale > 1.0)
+      spdlog::info("{}: images of {}x{} pixels, shrunk by {:.2f} for the SfM (--downscale)",
+                   command_name, width, height, o->sfm.tracks.harris.downscale);
+  }
   ThrowIfInvalid(o->sfm.Check(), "SfmRunnerOptions");
   const double offset_ratio = rig.MaxCenterOffset() / o->scene_depth;
   if (o->sfm.tracker.central && offset_ratio > o->max_central_offset_ratio)

@@ -13,6 +13,8 @@ struct SfmCommandLine {
   bool central = false;      // --central: force the central approximation
   bool non_central = false;  // --non-central: force the true camera offsets
   double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
+  // --downscale; 0: from the image size (WorkingDownscale of the largest camera image).
+  double downscale = 0.0;
   // Central mode treats the camera centres as one point: a camera offset d seen at depth z
   // bends the rays by about d / z radians. The map's scale is unknown in central mode, so the
   // depth is the user's (metres; street facades are 5-20 m away); above this ratio of the

@@ -26,13 +26,15 @@ SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
   const Rig& rig = drive.rig();
   SfmOutputs outputs;
   std::filesystem::create_directories(folder / "stats");
-  std::vector<StampedPose> poses;
+  // The drive's own clock (frames.csv) when it has one.
+  auto timestamp = [&](size_t frame) {
+    return drive.HasTimestamps() ? drive.FrameTimestamp(frame) : frame / options.frame_rate;
+  };
+  std::vector<StampedPose> poses, frame_poses;
+  for (const SfmFramePose& pose : TrackedFramePoses(run))
+    frame_poses.push_back({timestamp(pose.frame), pose.world_from_rig});
   for (const FinalizedKeyframe& keyframe : run.keyframes) {
-    // The drive's own clock (frames.csv) when it has one.
-    const double timestamp = drive.HasTimestamps()
-                                 ? drive.FrameTimestamp(static_cast<size_t>(keyframe.frame))
-                                 : keyframe.frame / options.frame_rate;
-    poses.push_back({timestamp, keyframe.world_from_rig});
+    poses.push_back({timestamp(static_cast<size_t>(keyframe.frame)), keyframe.world_from_rig});
     for (const FinalizedPoint& point : keyframe.points)
       outputs.cloud.points.push_back(point.position);
   }
@@ -44,6 +46,7 @@ SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
   if (run.outcome != SfmOutcome::kNotInitialised) {
     // No map files without a map: the stats say what happened.
     WriteTum(poses, folder / "poses.tum");
+    WriteTum(frame_poses, folder / "frame_poses.tum");
     WritePlyPoints(outputs.cloud, folder / "points.ply");
     colmap = WriteColmapTextModel(
         rig, run.keyframes,

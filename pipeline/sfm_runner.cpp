@@ -115,6 +115,34 @@ struct SfmRunner::Impl {
                : tracker_frame;
   }
 
+  // The row's pose relative to the newest keyframe.
+  void SetReference(SfmFrameRow* row, const Rigid3d& world_from_rig) const {
+    const std::vector<Rigid3d> keyframe_poses = tracker.KeyframePoses();
+    if (keyframe_poses.empty()) return;
+    row->reference_keyframe = static_cast<int>(keyframe_poses.size()) - 1;
+    row->keyframe_from_rig = keyframe_poses.back().Inverse() * world_from_rig;
+  }
+  // The tracker's second thoughts on earlier frames (see Tracker::TakeRevisedFrames).
+  void ApplyRevisions() {
+    for (Tracker::RevisedFrame& revision : tracker.TakeRevisedFrames()) {
+      const size_t input = static_cast<size_t>(InputFrame(revision.frame));
+      auto row =
+          std::lower_bound(result.frames.begin(), result.frames.end(), input,
+                           [](const SfmFrameRow& r, size_t frame) { return r.frame < frame; });
+      if (row == result.frames.end() || row->frame != input) continue;
+      row->result = revision.result;
+      row->reference_keyframe = -1;
+      if (row->result.tracked) {
+        // Frames resected in a new map: relative to its first keyframe.
+        const std::vector<Rigid3d> keyframe_poses = tracker.KeyframePoses();
+        if (!keyframe_poses.empty()) {
+          row->reference_keyframe = 0;
+          row->keyframe_from_rig = keyframe_poses[0].Inverse() * row->result.world_from_rig;
+        }
+      }
+    }
+  }
+
   void HandOver() {
     for (FinalizedKeyframe& keyframe : tracker.TakeFinalized()) {
       keyframe.frame = InputFrame(keyframe.frame);
@@ -172,21 +200,42 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
     }
   } else {
     row.loaded = true;
-    const TrackedFrame tracked =
+    TrackedFrame tracked =
         s.builder.AddFrame(frame.images, ReprojectionPredictor(s.tracker, s.rig));
     row.corners = tracked.num_corners;
     row.matched = tracked.num_matched;
     row.predicted = tracked.num_predicted;
     row.relocalising = tracked.relocalising;
     s.input_frames.push_back(row.frame);
-    row.result = s.tracker.AddFrame(tracked.observations, s.builder.MapPointSearcher());
+    Tracker& tracker = s.tracker;
+    if (s.options.stereo_matching && !s.options.tracker.central && !tracker.Initialised()) {
+      const int stereo = s.builder.MatchOverlappingCameras(&tracked);
+      spdlog::debug("frame {}: {} matches between overlapping cameras", name, stereo);
+    }
+    row.result = tracker.AddFrame(tracked.observations, s.builder.MapPointSearcher());
+    if (!row.result.tracked && s.options.descriptor_retry) {
+      // Without a map only the first keyframe can help (the last tracked frame).
+      const int references = tracker.Initialised() ? s.builder.NumRematchReferences()
+                                                   : std::min(1, s.builder.NumRematchReferences());
+      for (int reference = 0; reference < references && !row.result.tracked; ++reference) {
+        if (!s.builder.RematchByDescriptors(reference, &tracked)) break;
+        const FrameResult retry =
+            tracker.RetryFrame(tracked.observations, s.builder.MapPointSearcher());
+        row.matched = tracked.num_matched;
+        row.relocalising = true;
+        if (!retry.tracked) continue;
+        row.result = retry;
+        row.result.status += " (by descriptors, reference " + std::to_string(reference) + ")";
+      }
+    }
     s.builder.SetFrameResult(row.result.tracked, row.result.keyframe);
     if (row.result.tracked) {
-      ++result.frames_tracked;
+      s.SetReference(&row, row.result.world_from_rig);
     } else {
       spdlog::warn("frame {}: not tracked ({}){}", name, row.result.status,
-                   tracked.relocalising ? ", re-localising against the last keyframe" : "");
+                   tracked.relocalising ? ", re-localising against the last keyframes" : "");
     }
+    s.ApplyRevisions();
     s.HandOver();
     if (s.closer && row.result.keyframe) {
       const auto loop_start = Clock::now();
@@ -210,8 +259,6 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
       }
     }
   }
-  // Where the untracked tail of the input begins (a frame tracked resets it).
-  if (row.result.tracked) result.lost_from = row.frame + 1;
   row.ms = 1e3 * (wait_seconds + SecondsSince(frame_start));
   result.frames.push_back(std::move(row));
   ++result.frames_total;
@@ -246,13 +293,40 @@ SfmRunResult SfmRunner::Finish() {
   result.front = s.builder.StageTimings();
   result.back = s.tracker.StageTimings();
   result.seconds = SecondsSince(s.start);
+  // What was tracked, after the revisions of the frames read while initialising.
+  result.frames_tracked = 0;
+  result.lost_from = 0;
+  result.untracked_runs.clear();
+  bool seen_tracked = false;
+  for (size_t i = 0; i < result.frames.size(); ++i) {
+    const SfmFrameRow& row = result.frames[i];
+    if (row.result.tracked) {
+      ++result.frames_tracked;
+      result.lost_from = i + 1;
+      seen_tracked = true;
+    } else if (row.loaded && seen_tracked) {
+      if (!result.untracked_runs.empty() && result.untracked_runs.back().last + 1 == i)
+        result.untracked_runs.back().last = i;
+      else
+        result.untracked_runs.push_back({i, i, false});
+    }
+  }
+  if (!result.untracked_runs.empty() &&
+      result.untracked_runs.back().last + 1 == result.frames.size())
+    result.untracked_runs.back().to_the_end = true;
+  for (const SfmUntrackedRun& run : result.untracked_runs) {
+    if (run.to_the_end) continue;
+    spdlog::warn("sfm: frames {} to {} ({}) were not tracked; tracking resumed at frame {}",
+                 result.frames[run.first].name, result.frames[run.last].name,
+                 run.last - run.first + 1, result.frames[run.last + 1].name);
+  }
   const size_t read = result.frames_total - result.skipped.size();
   const size_t lost_tail = result.frames_total - std::min(result.lost_from, result.frames_total);
-  if (s.tracker.NumKeyframes() < 2) {
+  if (!s.tracker.Initialised()) {
     result.outcome = SfmOutcome::kNotInitialised;
     std::ostringstream why;
-    why << "the SfM could not initialise (fewer than 2 keyframes; " << result.frames_tracked
-        << " of " << read << " frames read were tracked)";
+    why << "the SfM could not initialise (no two frames with enough parallax, no stereo map; "
+        << result.frames_tracked << " of " << read << " frames read were tracked)";
     result.outcome_reason = why.str();
   } else if (static_cast<double>(result.frames_tracked) <
              s.options.usable_tracked_frames_share * static_cast<double>(read)) {
@@ -275,6 +349,19 @@ SfmRunResult SfmRunner::Finish() {
     if (lost_tail > 0) spdlog::warn("sfm: {}", result.outcome_reason);
   }
   return std::move(result);
+}
+
+std::vector<SfmFramePose> TrackedFramePoses(const SfmRunResult& run) {
+  std::vector<SfmFramePose> poses;
+  for (const SfmFrameRow& row : run.frames) {
+    if (!row.result.tracked) continue;
+    const int k = row.reference_keyframe;
+    if (k >= 0 && static_cast<size_t>(k) < run.keyframes.size() && run.keyframes[k].keyframe == k)
+      poses.push_back({row.frame, run.keyframes[k].world_from_rig * row.keyframe_from_rig});
+    else
+      poses.push_back({row.frame, row.result.world_from_rig});
+  }
+  return poses;
 }
 
 SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunnerOptions& options,

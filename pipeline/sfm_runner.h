@@ -37,6 +37,13 @@ struct SfmRunnerOptions {
   // keyframes fixed), and the corrected map handed over again (map_corrected), as after a loop
   // closure.
   bool final_bundle_adjustment = true;
+  // A frame the motion model does not track is matched again by descriptors against the last
+  // keyframes, newest first (TrackBuilderOptions::rematch_keyframes of them), and retried.
+  bool descriptor_retry = true;
+  // Non-central mode: while there is no map, the cameras whose fields of view overlap are
+  // matched with each other, so that a rig that does not move starts a metric map from its
+  // own baseline (TrackerOptions::stereo_initialisation).
+  bool stereo_matching = true;
   int max_frames = 0;  // 0: every frame of the input
   // A run is usable when the SfM initialised and at least this share of the frames read was
   // tracked; below it the map covers too little of the drive (tracking was lost for good).
@@ -56,6 +63,26 @@ struct SfmFrameRow {
   FrameResult result;
   double ms = 0.0;  // waiting for the images, tracking and, for a keyframe, the local
                     // adjustment and the loop closer
+  // A tracked frame's pose relative to the newest keyframe when it was tracked, so that a
+  // correction of the keyframes (loop closure, final adjustment) carries the frame along.
+  int reference_keyframe = -1;
+  Rigid3d keyframe_from_rig;
+};
+
+// world_from_rig of every tracked frame: its reference keyframe's final pose times the
+// relative pose it was tracked with (for poses.tum of every frame).
+struct SfmFramePose {
+  size_t frame = 0;
+  Rigid3d world_from_rig;
+};
+struct SfmRunResult;
+std::vector<SfmFramePose> TrackedFramePoses(const SfmRunResult& run);
+
+// A run of frames read but not tracked, between tracked frames or to the end (row indices,
+// inclusive).
+struct SfmUntrackedRun {
+  size_t first = 0, last = 0;
+  bool to_the_end = false;
 };
 
 std::string SfmFramesCsvHeader();
@@ -86,6 +113,7 @@ struct SfmRunResult {
   // The first frame of the last run of untracked frames that lasts to the end of the input
   // (frames_total when the last frame read was tracked).
   size_t lost_from = 0;
+  std::vector<SfmUntrackedRun> untracked_runs;  // after the first tracked frame
   SfmOutcome outcome = SfmOutcome::kNotInitialised;
   std::string outcome_reason;  // one line: what happened, for stderr and the run's summary
 

@@ -372,4 +372,10 @@ std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOpt
   return distinct;
 }
 
+double WorkingDownscale(int width, int height, int target_longest_side) {
+  const int longest = std::max(width, height);
+  if (target_longest_side <= 0 || longest <= 1.25 * target_longest_side) return 1.0;
+  return static_cast<double>(longest) / target_longest_side;
+}
+
 }  // namespace omni

@@ -53,6 +53,11 @@ struct Corner {
 cv::Mat PrepareImage(const cv::Mat& input, const HarrisOptions& options);
 
 // Pixel of the prepared image -> pixel of the input image (pixel centres at integers).
+// The shrink factor of a rig's images when none is given: the longest image side to about
+// target_longest_side pixels (the working resolution the tracker's pixel radii are tuned for);
+// 1 for images up to 1.25 times that.
+double WorkingDownscale(int width, int height, int target_longest_side = 640);
+
 Eigen::Vector2d PreparedToInputPixel(const Eigen::Vector2d& prepared, double downscale);
 Eigen::Vector2d InputToPreparedPixel(const Eigen::Vector2d& input, double downscale);
 

@@ -13,6 +13,7 @@ std::string KeyframeSelectionOptions::Check() const {
   if (!(max_rotation > 0.0)) return "max_rotation: expected a positive angle (radians)";
   if (!(min_tracked_share > 0.0 && min_tracked_share < 1.0))
     return "min_tracked_share: expected a value in (0, 1)";
+  if (min_tracked_points < 0) return "min_tracked_points: expected 0 or more";
   return {};
 }
 
@@ -42,6 +43,9 @@ KeyframeDecisionReason DecideKeyframe(const KeyframeCandidate& candidate,
   } else if (result.tracked_share < options.min_tracked_share) {
     result.decision = KeyframeDecision::kKeyframe;
     result.reason = "few tracked points";
+  } else if (candidate.inliers < options.min_tracked_points) {
+    result.decision = KeyframeDecision::kKeyframe;
+    result.reason = "few points left";
   } else {
     result.reason = "enough tracked points";
   }

@@ -21,6 +21,9 @@ struct KeyframeSelectionOptions {
   // On the synthetic demo drive (0.44 m between frames) 0.3 gives a keyframe every ~1.5 m,
   // close to the paper's 1.9 m (§5), with the same trajectory error as 0.7 (every frame).
   double min_tracked_share = 0.3;
+  // A keyframe also once fewer than this many points are tracked, whatever the share: the map
+  // must grow before the tracking runs out of points (wide baselines, low frame rates).
+  int min_tracked_points = 60;
 
   std::string Check() const;
 };
@@ -35,6 +38,7 @@ struct KeyframeCandidate {
   Rigid3d world_from_rig;        // the current frame's estimated pose
   int last_keyframe_points = 0;  // points of the last keyframe
   int tracked_points = 0;        // of those, still tracked in the current frame
+  int inliers = 0;               // points of the map the frame's pose agrees with
   double median_depth = 0.0;     // of the tracked points from the current frame (map units)
 };
 

@@ -6,8 +6,10 @@
 #include <cassert>
 #include <chrono>
 #include <stdexcept>
+#include <unordered_set>
 
 #include "calib/error.h"
+#include "calib/rig_report.h"
 
 namespace omni {
 
@@ -21,6 +23,11 @@ std::string TrackBuilderOptions::Check() const {
     return "relocalisation_search_radius: expected a positive number of pixels";
   if (const std::string problem = map_search.Check(); !problem.empty())
     return "map_search." + problem;
+  if (const std::string problem = descriptors.Check(); !problem.empty())
+    return "descriptors." + problem;
+  if (rematch_keyframes < 0) return "rematch_keyframes: expected 0 or more";
+  if (!(stereo_max_epipolar_angle > 0.0))
+    return "stereo_max_epipolar_angle: expected a positive angle (radians)";
   return {};
 }
 
@@ -67,7 +74,6 @@ TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   ++frame_index_;
-  observation_corners_.clear();
 
   // Detection, in parallel over the cameras.
   auto start = std::chrono::steady_clock::now();
@@ -131,23 +137,158 @@ TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
     } else if (frame.relocalising) {
       state.flow = Eigen::Vector2d::Zero();
     }
-    const Camera& camera = rig_.cameras[c];
-    for (size_t i = 0; i < corners[c].size(); ++i) {
-      if (tracks[i] < 0) tracks[i] = next_track_++;
-      const Eigen::Vector2d pixel = PreparedToInputPixel(corners[c][i], options_.harris.downscale);
-      Eigen::Vector3d bearing;
-      if (!camera.Unproject(pixel, &bearing)) continue;
-      frame.observations.push_back({tracks[i], c, bearing});
-      frame.pixels.push_back(pixel);
-      observation_corners_.emplace_back(c, static_cast<int>(i));
-    }
+    for (int& track : tracks)
+      if (track < 0) track = next_track_++;
     frame.num_corners += static_cast<int>(corners[c].size());
     state.prepared = prepared[c];
     state.corners = std::move(corners[c]);
     state.tracks = std::move(tracks);
+    state.descriptors.release();
   }
+  BuildObservations(&frame);
   timings_.match += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return frame;
+}
+
+void TrackBuilder::BuildObservations(TrackedFrame* frame) {
+  frame->observations.clear();
+  frame->pixels.clear();
+  observation_corners_.clear();
+  for (size_t c = 0; c < cameras_.size(); ++c) {
+    const Camera& camera = rig_.cameras[c];
+    const CameraState& state = cameras_[c];
+    for (size_t i = 0; i < state.corners.size(); ++i) {
+      const Eigen::Vector2d pixel =
+          PreparedToInputPixel(state.corners[i], options_.harris.downscale);
+      Eigen::Vector3d bearing;
+      if (!camera.Unproject(pixel, &bearing)) continue;
+      frame->observations.push_back({state.tracks[i], static_cast<int>(c), bearing});
+      frame->pixels.push_back(pixel);
+      observation_corners_.emplace_back(static_cast<int>(c), static_cast<int>(i));
+    }
+  }
+}
+
+const cv::Mat& TrackBuilder::Describe(CameraState* state) const {
+  if (state->descriptors.empty() ||
+      state->descriptors.rows != static_cast<int>(state->corners.size()))
+    state->descriptors = DescribeCorners(state->prepared, state->corners, options_.descriptors);
+  return state->descriptors;
+}
+
+int TrackBuilder::NumRematchReferences() const {
+  const bool own_entry =
+      last_tracked_.first >= 0 &&
+      (keyframe_history_.empty() || keyframe_history_[0].first != last_tracked_.first);
+  return static_cast<int>(keyframe_history_.size()) + (own_entry ? 1 : 0);
+}
+
+std::vector<TrackBuilder::CameraState>* TrackBuilder::RematchReference(int reference) {
+  if (reference < 0 || reference >= NumRematchReferences()) return nullptr;
+  const bool own_entry = NumRematchReferences() > static_cast<int>(keyframe_history_.size());
+  if (own_entry && reference == 0) return &last_tracked_.second;
+  return &keyframe_history_[reference - (own_entry ? 1 : 0)].second;
+}
+
+bool TrackBuilder::RematchByDescriptors(int reference, TrackedFrame* frame) {
+  std::vector<CameraState>* reference_state = RematchReference(reference);
+  if (!reference_state) return false;
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<CameraState>& keyframe = *reference_state;
+  const int num_cameras = static_cast<int>(cameras_.size());
+  // All cameras against all: a rig that turned sees a point in another camera.
+  std::vector<std::pair<int, int>> rows_now, rows_then;  // (camera, corner) of each row
+  cv::Mat now, then;
+  for (int c = 0; c < num_cameras; ++c) {
+    tbb::parallel_for(0, 2, [&](int which) { Describe(which == 0 ? &cameras_[c] : &keyframe[c]); });
+    now.push_back(cameras_[c].descriptors);
+    then.push_back(keyframe[c].descriptors);
+    for (size_t i = 0; i < cameras_[c].corners.size(); ++i) rows_now.emplace_back(c, i);
+    for (size_t i = 0; i < keyframe[c].corners.size(); ++i) rows_then.emplace_back(c, i);
+  }
+  const std::vector<DescriptorMatch> matches = MatchDescriptors(now, then, options_.descriptors);
+  // The keyframe's track for each matched corner; a corner of the same camera that carried
+  // that track before gives it up (one observation of a track per camera).
+  std::vector<std::vector<int>> assigned(num_cameras);
+  for (int c = 0; c < num_cameras; ++c) assigned[c].assign(cameras_[c].corners.size(), -1);
+  for (const DescriptorMatch& match : matches) {
+    const auto [c, i] = rows_now[match.index1];
+    const auto [kc, ki] = rows_then[match.index2];
+    assigned[c][i] = keyframe[kc].tracks[ki];
+  }
+  // The association replaces the motion model's: a corner no descriptor matched starts a
+  // new track.
+  int matched = 0;
+  for (int c = 0; c < num_cameras; ++c) {
+    std::vector<int>& tracks = cameras_[c].tracks;
+    for (size_t i = 0; i < tracks.size(); ++i) {
+      tracks[i] = assigned[c][i] >= 0 ? assigned[c][i] : next_track_++;
+      matched += assigned[c][i] >= 0;
+    }
+    cameras_[c].flow = Eigen::Vector2d::Zero();
+  }
+  frame->num_matched = matched;
+  frame->relocalising = true;
+  BuildObservations(frame);
+  timings_.match += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return true;
+}
+
+int TrackBuilder::MatchOverlappingCameras(TrackedFrame* frame) {
+  const auto start = std::chrono::steady_clock::now();
+  const int num_cameras = static_cast<int>(cameras_.size());
+  int total = 0;
+  for (int a = 0; a < num_cameras; ++a)
+    for (int b = a + 1; b < num_cameras; ++b) {
+      if (ComputeViewOverlap(rig_, a, b, 16) < 0.05 && ComputeViewOverlap(rig_, b, a, 16) < 0.05)
+        continue;
+      const Camera& camera_a = rig_.cameras[a];
+      const Camera& camera_b = rig_.cameras[b];
+      // b_from_a, and the baseline: without one the pair sees no depth.
+      const Rigid3d b_from_a = camera_b.cam_from_rig * camera_a.cam_from_rig.Inverse();
+      const Eigen::Vector3d baseline = b_from_a.translation;  // centre of a, in b's frame
+      if (baseline.norm() < 1e-6) continue;
+      CameraState& state_a = cameras_[a];
+      CameraState& state_b = cameras_[b];
+      const std::vector<DescriptorMatch> matches =
+          MatchDescriptors(Describe(&state_a), Describe(&state_b), options_.descriptors);
+      std::unordered_set<int> tracks_b(state_b.tracks.begin(), state_b.tracks.end());
+      for (const DescriptorMatch& match : matches) {
+        Eigen::Vector3d bearing_a, bearing_b;
+        if (!camera_a.Unproject(
+                PreparedToInputPixel(state_a.corners[match.index1], options_.harris.downscale),
+                &bearing_a) ||
+            !camera_b.Unproject(
+                PreparedToInputPixel(state_b.corners[match.index2], options_.harris.downscale),
+                &bearing_b))
+          continue;
+        // In b's frame: ray a from the centre of a, ray b from the origin.
+        const Eigen::Vector3d direction_a = b_from_a.rotation * bearing_a;
+        const Eigen::Vector3d normal = baseline.cross(direction_a);
+        if (normal.norm() < 1e-9) continue;
+        const double epipolar =
+            std::asin(std::min(1.0, std::abs(normal.normalized().dot(bearing_b.normalized()))));
+        if (epipolar > options_.stereo_max_epipolar_angle) continue;
+        // Depths along both rays (closest points of the two lines) must be positive.
+        const Eigen::Vector3d w = baseline;  // from the origin of b to the centre of a
+        const double aa = direction_a.dot(direction_a), bb = bearing_b.dot(bearing_b),
+                     ab = direction_a.dot(bearing_b);
+        const double denominator = aa * bb - ab * ab;
+        if (denominator < 1e-12) continue;
+        const double depth_a = (ab * bearing_b.dot(w) - bb * direction_a.dot(w)) / denominator;
+        const double depth_b = (aa * bearing_b.dot(w) - ab * direction_a.dot(w)) / denominator;
+        if (!(depth_a > 0.0 && depth_b > 0.0)) continue;
+        const int track = state_a.tracks[match.index1];
+        if (tracks_b.count(track)) continue;  // b sees that track already
+        tracks_b.erase(state_b.tracks[match.index2]);
+        state_b.tracks[match.index2] = track;
+        tracks_b.insert(track);
+        ++total;
+      }
+    }
+  BuildObservations(frame);
+  timings_.match += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return total;
 }
 
 MapPointSearchFn TrackBuilder::MapPointSearcher() {
@@ -209,7 +350,13 @@ std::vector<Reobservation> TrackBuilder::SearchMapPoints(
 
 void TrackBuilder::SetFrameResult(bool tracked, bool keyframe) {
   lost_ = !tracked;
-  if (tracked && keyframe) keyframe_cameras_ = cameras_;
+  if (tracked && options_.rematch_keyframes > 0) last_tracked_ = {frame_index_, cameras_};
+  if (!keyframe) return;
+  keyframe_cameras_ = cameras_;
+  if (options_.rematch_keyframes == 0) return;
+  keyframe_history_.insert(keyframe_history_.begin(), {frame_index_, cameras_});
+  if (static_cast<int>(keyframe_history_.size()) > options_.rematch_keyframes)
+    keyframe_history_.pop_back();
 }
 
 }  // namespace omni

@@ -12,6 +12,12 @@
 // to be searched among the corners whose track has no point (MapPointSearcher, matching of
 // sfm/map_point_search.h): a corner found to be a map point takes the point's track, in any
 // camera, which continues tracks across overlapping neighbour cameras.
+// When the image-motion model fails (wide baselines, low frame rates, the first frames, after a
+// gap), the frame just added can be matched again without any prior (RematchByDescriptors:
+// binary descriptors at the corners, all cameras against all, sfm/descriptor_matching.h)
+// against one of the last keyframes, newest first; its corners take the keyframe's tracks.
+// For a rig whose cameras overlap, MatchOverlappingCameras gives the corners that two cameras
+// of the frame see alike one track, checked against the rig's own epipolar geometry.
 
 #include <Eigen/Core>
 #include <functional>
@@ -20,6 +26,7 @@
 #include <vector>
 
 #include "calib/rig.h"
+#include "sfm/descriptor_matching.h"
 #include "sfm/harris.h"
 #include "sfm/map_point_search.h"
 #include "sfm/tracker.h"
@@ -42,6 +49,13 @@ struct TrackBuilderOptions {
   bool follow_window = true;
   // Re-observation of the map points once the frame is resected (MapPointSearcher).
   MapPointSearchOptions map_search;
+  // Matching without a motion prior (RematchByDescriptors, MatchOverlappingCameras).
+  DescriptorMatchingOptions descriptors;
+  // Keyframes kept for RematchByDescriptors (the newest first).
+  int rematch_keyframes = 3;
+  // MatchOverlappingCameras: a match is kept when each ray passes within this angle of the
+  // other camera's epipolar plane (radians) and the two rays meet in front of both cameras.
+  double stereo_max_epipolar_angle = 0.004;
 
   std::string Check() const;
 };
@@ -72,6 +86,17 @@ class TrackBuilder {
   // What the tracker made of the frame just added: a keyframe becomes the reference of a later
   // re-localisation; after a frame not tracked, the next frames are matched against it.
   void SetFrameResult(bool tracked, bool keyframe);
+  // Matches the frame just added again, by descriptors, against reference frame `reference`:
+  // 0 is the last tracked frame, then the last keyframes, newest first (a frame is listed
+  // once): every corner a descriptor matches takes the reference corner's track; the others
+  // start new tracks. False (and *frame untouched) when there is no such reference. The
+  // map-point search then works on the new tracks.
+  bool RematchByDescriptors(int reference, TrackedFrame* frame);
+  int NumRematchReferences() const;
+  // Matches the corners of every pair of cameras of the frame just added whose fields of view
+  // overlap, by descriptors, keeping the matches that the rig's epipolar geometry accepts;
+  // the second corner of a match takes the first's track. Returns the number of matches.
+  int MatchOverlappingCameras(TrackedFrame* frame);
   // The search of map points among the corners of the frame just added, for
   // Tracker::AddFrame: a corner matched to a map point takes the point's track (also for the
   // frame-to-frame chaining that follows). Valid while the builder lives.
@@ -92,11 +117,23 @@ class TrackBuilder {
     std::vector<Eigen::Vector2d> corners;  // prepared pixels
     std::vector<int> tracks;
     Eigen::Vector2d flow = Eigen::Vector2d::Zero();  // predicted displacement per frame
+    cv::Mat descriptors;  // of the corners, computed when first needed (Describe)
   };
+  // The descriptors of a camera state's corners (computed once; again after corners were
+  // added by the map-point search).
+  const cv::Mat& Describe(CameraState* state) const;
+  // The frame's observations (bearings of every corner) from cameras_, and which corner each
+  // one is.
+  void BuildObservations(TrackedFrame* frame);
   Rig rig_;
   TrackBuilderOptions options_;
   std::vector<CameraState> cameras_;
   std::vector<CameraState> keyframe_cameras_;  // the last keyframe's, for re-localisation
+  // The last rematch_keyframes keyframes' states, newest first, and the last tracked frame's,
+  // with their frame indices.
+  std::vector<std::pair<int, std::vector<CameraState>>> keyframe_history_;
+  std::pair<int, std::vector<CameraState>> last_tracked_{-1, {}};
+  std::vector<CameraState>* RematchReference(int reference);
   bool lost_ = false;
   int next_track_ = 0;
   int frame_index_ = -1;  // of the frame just added

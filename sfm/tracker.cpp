@@ -29,6 +29,10 @@ std::string TrackerOptions::Check() const {
   if (global_bundle_adjustment_threads < 1)
     return "global_bundle_adjustment_threads: expected at least 1";
   if (min_init_points < 5) return "min_init_points: expected at least 5";
+  if (max_init_frames < 1) return "max_init_frames: expected at least 1";
+  if (min_stereo_points < 5) return "min_stereo_points: expected at least 5";
+  if (!(stereo_min_ray_angle > 0.0))
+    return "stereo_min_ray_angle: expected a positive angle (radians)";
   if (min_resection_inliers < 4) return "min_resection_inliers: expected at least 4";
   if (!(max_jump_ratio > 1.0)) return "max_jump_ratio: expected more than 1";
   if (map_search_keyframes < 1) return "map_search_keyframes: expected at least 1";
@@ -79,6 +83,13 @@ struct Tracker::Impl {
     Rigid3d world_from_rig;
   };
   std::vector<TrackedPose> last_tracked;  // at most two, oldest first
+  // The frames read after the first keyframe that did not initialise, for their resection
+  // once the map exists; the results changed since the last TakeRevisedFrames.
+  std::vector<std::pair<int, std::vector<TrackObservation>>> init_frames;
+  std::vector<Tracker::RevisedFrame> revised;
+  // A map exists: two keyframes, or points triangulated in the first by the rig's baseline.
+  bool initialised = false;
+  bool map_from_stereo = false;  // the map started from the first keyframe's stereo points
   double travelled = 0.0;
   int travelled_steps = 0;
   Tracker::Timings timings;
@@ -142,6 +153,14 @@ struct Tracker::Impl {
   }
 
   FrameResult Initialise(const std::vector<TrackObservation>& observations);
+  // The frame num_frames - 1 becomes the first keyframe (a new start: the map so far is
+  // dropped); in non-central mode its stereo tracks may give the map at once.
+  FrameResult StartMap(const std::vector<TrackObservation>& observations);
+  int TriangulateStereo();
+  // Initialise or Track, and what follows from it (the motion model, the frames read while
+  // initialising).
+  FrameResult Process(const std::vector<TrackObservation>& observations,
+                      const MapPointSearchFn& search);
   FrameResult Track(const std::vector<TrackObservation>& observations,
                     const MapPointSearchFn& search);
   // The map-point search of a frame posed at world_from_rig (see MapPointSearchFn).
@@ -445,6 +464,7 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   KeyframeCandidate candidate;
   candidate.last_keyframe_world_from_rig = keyframes[last].world_from_rig;
   candidate.world_from_rig = world_from_rig;
+  candidate.inliers = ransac.num_inliers;
   std::vector<double> depths;
   std::vector<char> tracked_now(points.size(), 0);
   for (size_t k = 0; k < bearings.size(); ++k) {
@@ -544,8 +564,11 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
 
 void Tracker::Impl::LocalBundleAdjustment() {
   const int num_keyframes = static_cast<int>(keyframes.size());
-  // The first two keyframes stay fixed: they fix the gauge (and the scale in central mode).
-  const int free_begin = std::max(2, num_keyframes - options.num_free_keyframes);
+  // The first two keyframes stay fixed: they fix the gauge (and the scale in central mode); a
+  // map started from the rig's stereo baseline has its scale, and its first keyframe fixes
+  // the gauge.
+  const int gauge_keyframes = map_from_stereo ? 1 : 2;
+  const int free_begin = std::max(gauge_keyframes, num_keyframes - options.num_free_keyframes);
   const int fixed_begin = std::max(0, free_begin - options.num_fixed_keyframes);
   BundleAdjustmentProblem problem;
   std::vector<int> problem_keyframe(num_keyframes, -1), keyframe_of;
@@ -666,27 +689,145 @@ Tracker::~Tracker() = default;
 
 FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations,
                               const MapPointSearchFn& search) {
-  ++impl_->num_frames;
-  if (impl_->keyframes.empty()) {
-    Impl::Keyframe keyframe;
-    keyframe.frame = impl_->num_frames - 1;
-    keyframe.observations = observations;
-    impl_->keyframes.push_back(std::move(keyframe));
-    FrameResult result;
-    result.tracked = true;
-    result.keyframe = true;
-    result.status = "first keyframe";
-    impl_->RecordTracked(0, result.world_from_rig);
+  Impl& s = *impl_;
+  ++s.num_frames;
+  const int frame = s.num_frames - 1;
+  // A new start when the first keyframe cannot be initialised from (see max_init_frames).
+  const bool restart =
+      !s.keyframes.empty() && !s.initialised &&
+      (frame - s.keyframes[0].frame > s.options.max_init_frames ||
+       static_cast<int>(s.keyframes[0].observations.size()) < s.options.min_init_points);
+  if (s.keyframes.empty() || restart) return s.StartMap(observations);
+  return s.Process(observations, search);
+}
+
+FrameResult Tracker::RetryFrame(const std::vector<TrackObservation>& observations,
+                                const MapPointSearchFn& search) {
+  Impl& s = *impl_;
+  const int frame = s.num_frames - 1;
+  FrameResult result;
+  if (s.keyframes.empty() || s.keyframes.back().frame == frame ||
+      (!s.last_tracked.empty() && s.last_tracked.back().frame == frame)) {
+    result.status = "no frame to retry";
     return result;
   }
-  const FrameResult result = impl_->keyframes.size() == 1 ? impl_->Initialise(observations)
-                                                          : impl_->Track(observations, search);
-  if (result.tracked) impl_->RecordTracked(impl_->num_frames - 1, result.world_from_rig);
+  return s.Process(observations, search);
+}
+
+FrameResult Tracker::Impl::StartMap(const std::vector<TrackObservation>& observations) {
+  const int frame = num_frames - 1;
+  if (!keyframes.empty()) {
+    // The first keyframe given up, and the frames waiting for its map.
+    FrameResult dropped;
+    dropped.status = "initialisation restarted from frame " + std::to_string(frame);
+    revised.push_back({keyframes[0].frame, dropped});
+  }
+  keyframes.clear();
+  points.clear();
+  point_stamp.clear();
+  track_to_point.clear();
+  pending.clear();
+  init_frames.clear();
+  last_tracked.clear();
+  travelled = 0.0;
+  travelled_steps = 0;
+  initialised = false;
+  map_from_stereo = false;
+  Keyframe keyframe;
+  keyframe.frame = frame;
+  keyframe.observations = observations;
+  keyframes.push_back(std::move(keyframe));
+  FrameResult result;
+  result.keyframe = true;
+  // A frame with too few observations (a black frame) cannot start a map: the next frame
+  // starts again (AddFrame).
+  result.tracked = static_cast<int>(observations.size()) >= options.min_init_points;
+  result.status = result.tracked ? "first keyframe" : "too few observations to start a map";
+  if (!options.central && options.stereo_initialisation) {
+    const int stereo_points = TriangulateStereo();
+    if (stereo_points >= options.min_stereo_points) {
+      initialised = true;
+      map_from_stereo = true;
+      result.inliers = stereo_points;
+      result.status = "initialised from the rig's stereo baseline";
+    } else {
+      points.clear();
+      point_stamp.clear();
+      track_to_point.clear();
+      pending.clear();
+    }
+  }
+  if (result.tracked) RecordTracked(frame, result.world_from_rig);
   return result;
 }
 
+int Tracker::Impl::TriangulateStereo() {
+  // The tracks that two or more cameras of the first keyframe observe.
+  std::unordered_map<int, std::vector<int>> by_track;
+  const Keyframe& keyframe0 = keyframes[0];
+  for (size_t i = 0; i < keyframe0.observations.size(); ++i)
+    by_track[keyframe0.observations[i].track].push_back(static_cast<int>(i));
+  TriangulationOptions triangulation = options.triangulation;
+  triangulation.min_ray_angle = options.stereo_min_ray_angle;
+  int count = 0;
+  for (const auto& [track, indices] : by_track) {
+    if (indices.size() < 2) continue;
+    std::vector<WorldRay> rays;
+    std::vector<PointObservation> point_observations;
+    for (int i : indices) {
+      const TrackObservation& o = keyframe0.observations[i];
+      rays.push_back(Ray(keyframe0.world_from_rig, o.camera, o.bearing));
+      point_observations.push_back({0, o.camera, o.bearing});
+    }
+    Eigen::Vector3d position;
+    if (TriangulatePoint(rays, triangulation, &position) != TriangulationStatus::kOk) continue;
+    AddPoint(track, position, 0, std::move(point_observations));
+    ++count;
+  }
+  return count;
+}
+
+FrameResult Tracker::Impl::Process(const std::vector<TrackObservation>& observations,
+                                   const MapPointSearchFn& search) {
+  const int frame = num_frames - 1;
+  const bool initialising = !initialised;
+  const FrameResult result = keyframes.size() == 1 && !initialised ? Initialise(observations)
+                                                                   : Track(observations, search);
+  if (result.tracked) RecordTracked(frame, result.world_from_rig);
+  if (initialising && !result.tracked) {
+    // Kept for its resection once the map exists (the last attempt at a frame wins).
+    if (!init_frames.empty() && init_frames.back().first == frame) init_frames.pop_back();
+    init_frames.emplace_back(frame, observations);
+  }
+  if (initialising && result.tracked) {
+    initialised = true;
+    // The frames read while initialising, resected in the new map.
+    for (const auto& [earlier, earlier_observations] : init_frames) {
+      if (earlier == frame) continue;
+      const Resection resection = Resect(earlier_observations);
+      if (!resection.ok) continue;
+      FrameResult late;
+      late.tracked = true;
+      late.world_from_rig = resection.world_from_rig;
+      late.inliers = resection.ransac.num_inliers;
+      late.status = "resected once the map existed";
+      revised.push_back({earlier, late});
+    }
+    init_frames.clear();
+  }
+  return result;
+}
+
+bool Tracker::Initialised() const { return impl_->initialised; }
+
+std::vector<Tracker::RevisedFrame> Tracker::TakeRevisedFrames() {
+  std::vector<RevisedFrame> taken = std::move(impl_->revised);
+  impl_->revised.clear();
+  return taken;
+}
+
 bool Tracker::PredictPose(Rigid3d* world_from_rig) const {
-  if (impl_->keyframes.size() < 2) return false;
+  if (!impl_->initialised) return false;
   return impl_->Predict(impl_->num_frames, world_from_rig) &&
          impl_->last_tracked.back().frame == impl_->num_frames - 1;
 }

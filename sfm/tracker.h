@@ -46,7 +46,20 @@ struct TrackerOptions {
   // Non-central initialisation: the generalised relative pose replaces the central five-point
   // one only when it triangulates this many times as many points.
   double noncentral_init_margin = 1.2;
-  int min_init_points = 50;        // points triangulated for the initialisation to be accepted
+  int min_init_points = 50;  // points triangulated for the initialisation to be accepted
+  // The initialisation starts again from the current frame (a new first keyframe) when this
+  // many frames after the first keyframe could not initialise (a bad first frame, a rig that
+  // does not move), or at once when the first keyframe has fewer than min_init_points
+  // observations (a black frame).
+  int max_init_frames = 10;
+  // One-frame initialisation (non-central mode): the tracks that two cameras of the first
+  // keyframe observe (overlapping cameras, matched by the front end) are triangulated with the
+  // rig's own baseline; with enough such points the map starts metric from
+  // that one frame. Their rays must be this far apart (radians: a stereo pair's baseline is
+  // short).
+  bool stereo_initialisation = true;
+  int min_stereo_points = 30;
+  double stereo_min_ray_angle = 0.5 * M_PI / 180.0;
   int min_resection_inliers = 30;  // fewer: the frame is reported as not tracked
   // Never a silently wrong map: a resected centre farther from the constant-velocity
   // prediction than max_jump_ratio times a step (the larger of the last step and the mean step
@@ -134,6 +147,20 @@ class Tracker {
   // is resected (see MapPointSearchFn); the observations it re-labels count as tracked.
   FrameResult AddFrame(const std::vector<TrackObservation>& observations,
                        const MapPointSearchFn& search = {});
+  // The frame last given to AddFrame again, with other observations (the front end matched it
+  // again, e.g. by descriptors against an older keyframe), after AddFrame did not track it.
+  FrameResult RetryFrame(const std::vector<TrackObservation>& observations,
+                         const MapPointSearchFn& search = {});
+  // Whether a map exists (two keyframes, or one from the rig's own stereo baseline).
+  bool Initialised() const;
+  // Frames whose result changed after they were added: the frames read while initialising,
+  // resected once the map exists, and a first keyframe given up by a restart of the
+  // initialisation (no longer tracked). Frame indices count the frames given to AddFrame.
+  struct RevisedFrame {
+    int frame = -1;
+    FrameResult result;
+  };
+  std::vector<RevisedFrame> TakeRevisedFrames();
   // Finalises every keyframe still in the window (end of the sequence).
   void Finish();
   // Keyframes finalised since the last call.

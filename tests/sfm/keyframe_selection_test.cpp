@@ -92,6 +92,7 @@ TEST(KeyframeSelection, DecisionRules) {
   candidate.last_keyframe_points = 100;
   candidate.median_depth = 10.0;
   candidate.tracked_points = 90;
+  candidate.inliers = 90;
   candidate.world_from_rig.translation = Eigen::Vector3d(0.1, 0, 0);  // ratio 0.01
   EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kSkip);
   candidate.tracked_points = 10;  // few tracked, but no parallax yet
@@ -99,6 +100,11 @@ TEST(KeyframeSelection, DecisionRules) {
   candidate.world_from_rig.translation = Eigen::Vector3d(1.0, 0, 0);  // ratio 0.1
   EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kKeyframe);
   candidate.tracked_points = 90;
+  EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kSkip);
+  // The share holds, but few points are left in absolute terms: the map must grow.
+  candidate.inliers = options.min_tracked_points - 1;
+  EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kKeyframe);
+  candidate.inliers = options.min_tracked_points;
   EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kSkip);
   candidate.world_from_rig.translation = Eigen::Vector3d(3.0, 0, 0);  // ratio 0.3
   EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kKeyframe);

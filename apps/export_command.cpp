@@ -34,7 +34,8 @@ void RunExport(const ExportCommandOptions& o, const GlobalOptions& global) {
   const fs::path folder(o.reconstruction);
   const std::string stem = o.closed ? "surface_closed" : "surface";
   const fs::path source = folder / (stem + ".ply");
-  const fs::path target = o.out.empty() ? folder / "export" / (stem + "." + o.format) : fs::path(o.out);
+  const fs::path target =
+      o.out.empty() ? folder / "export" / (stem + "." + o.format) : fs::path(o.out);
   if (fs::exists(target) && !o.force)
     throw InputError(target, "--out", "exists (--force replaces it)");
   const TriangleMesh mesh = ReadPlyMesh(source);
@@ -50,10 +51,10 @@ void RunExport(const ExportCommandOptions& o, const GlobalOptions& global) {
   else
     WritePlyMesh(mesh, target);
   if (!global.quiet)
-    spdlog::info("export: {} vertices, {} triangles{} from {}", mesh.vertices.size(),
-                 mesh.triangles.size(),
-                 points.points.empty() ? "" : ", " + std::to_string(points.points.size()) + " points",
-                 source.string());
+    spdlog::info(
+        "export: {} vertices, {} triangles{} from {}", mesh.vertices.size(), mesh.triangles.size(),
+        points.points.empty() ? "" : ", " + std::to_string(points.points.size()) + " points",
+        source.string());
   std::printf("wrote %s\n", target.string().c_str());
 }
 

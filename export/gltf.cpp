@@ -13,9 +13,9 @@
 namespace omni {
 namespace {
 
-constexpr uint32_t kGlbMagic = 0x46546C67;      // "glTF"
-constexpr uint32_t kChunkJson = 0x4E4F534A;     // "JSON"
-constexpr uint32_t kChunkBin = 0x004E4942;      // "BIN\0"
+constexpr uint32_t kGlbMagic = 0x46546C67;   // "glTF"
+constexpr uint32_t kChunkJson = 0x4E4F534A;  // "JSON"
+constexpr uint32_t kChunkBin = 0x004E4942;   // "BIN\0"
 constexpr int kFloat = 5126, kUnsignedByte = 5121, kUnsignedInt = 5125;
 constexpr int kArrayBuffer = 34962, kElementArrayBuffer = 34963;
 constexpr int kModePoints = 0, kModeTriangles = 4;
@@ -26,8 +26,7 @@ void CheckInput(const TriangleMesh& mesh, const PointCloud& points) {
                                 std::to_string(mesh.vertices.size()) + " vertices");
   if (!points.colors.empty() && points.colors.size() != points.points.size())
     throw std::invalid_argument("points: " + std::to_string(points.colors.size()) +
-                                " colours for " + std::to_string(points.points.size()) +
-                                " points");
+                                " colours for " + std::to_string(points.points.size()) + " points");
   const int n = static_cast<int>(mesh.vertices.size());
   for (const Eigen::Vector3i& t : mesh.triangles)
     for (int k = 0; k < 3; ++k)
@@ -44,8 +43,8 @@ class GlbBuilder {
     while (bin_.size() % 4 != 0) bin_.push_back('\0');
     const size_t offset = bin_.size();
     bin_.append(static_cast<const char*>(data), bytes);
-    views_.push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", bytes},
-                      {"target", target}});
+    views_.push_back(
+        {{"buffer", 0}, {"byteOffset", offset}, {"byteLength", bytes}, {"target", target}});
     return static_cast<int>(views_.size()) - 1;
   }
 
@@ -86,10 +85,9 @@ class GlbBuilder {
         indices.push_back(static_cast<uint32_t>(t[k]));
         hi = std::max(hi, indices.back());
       }
-    const int view = AddView(indices.data(), indices.size() * sizeof(uint32_t),
-                             kElementArrayBuffer);
-    return AddAccessor(view, kUnsignedInt, indices.size(), "SCALAR",
-                       {{"min", {0}}, {"max", {hi}}});
+    const int view =
+        AddView(indices.data(), indices.size() * sizeof(uint32_t), kElementArrayBuffer);
+    return AddAccessor(view, kUnsignedInt, indices.size(), "SCALAR", {{"min", {0}}, {"max", {hi}}});
   }
 
   const std::string& bin() const { return bin_; }
@@ -158,21 +156,21 @@ std::string EncodeGlb(const TriangleMesh& mesh, const PointCloud& points) {
   std::string bin = builder.bin();
   while (bin.size() % 4 != 0) bin.push_back('\0');
 
-  const nlohmann::json gltf = {
-      {"asset", {{"version", "2.0"}, {"generator", "omnisculpt"}}},
-      {"scene", 0},
-      {"scenes", {{{"name", "reconstruction"}, {"nodes", {0}}}}},
-      {"nodes", nodes},
-      {"meshes", meshes},
-      {"materials",
-       {{{"name", "surface"},
-         {"pbrMetallicRoughness",
-          {{"baseColorFactor", {1.0, 1.0, 1.0, 1.0}}, {"metallicFactor", 0.0},
-           {"roughnessFactor", 1.0}}},
-         {"doubleSided", false}}}},
-      {"buffers", {{{"byteLength", bin.size()}}}},
-      {"bufferViews", builder.views()},
-      {"accessors", builder.accessors()}};
+  const nlohmann::json gltf = {{"asset", {{"version", "2.0"}, {"generator", "omnisculpt"}}},
+                               {"scene", 0},
+                               {"scenes", {{{"name", "reconstruction"}, {"nodes", {0}}}}},
+                               {"nodes", nodes},
+                               {"meshes", meshes},
+                               {"materials",
+                                {{{"name", "surface"},
+                                  {"pbrMetallicRoughness",
+                                   {{"baseColorFactor", {1.0, 1.0, 1.0, 1.0}},
+                                    {"metallicFactor", 0.0},
+                                    {"roughnessFactor", 1.0}}},
+                                  {"doubleSided", false}}}},
+                               {"buffers", {{{"byteLength", bin.size()}}}},
+                               {"bufferViews", builder.views()},
+                               {"accessors", builder.accessors()}};
   std::string json = gltf.dump();
   while (json.size() % 4 != 0) json.push_back(' ');
 

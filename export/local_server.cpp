@@ -55,8 +55,7 @@ std::string PercentDecoded(const std::string& text) {
 
 std::string LocalServerOptions::Check() const {
   in_addr parsed{};
-  if (inet_pton(AF_INET, address.c_str(), &parsed) != 1 ||
-      (ntohl(parsed.s_addr) >> 24) != 127)
+  if (inet_pton(AF_INET, address.c_str(), &parsed) != 1 || (ntohl(parsed.s_addr) >> 24) != 127)
     return "address: must be a loopback address 127.x.y.z";
   if (port < 0 || port > 65535) return "port: must be in [0, 65535]";
   return {};

@@ -33,7 +33,8 @@ std::string Base64(const std::string& bytes) {
   size_t i = 0;
   for (; i + 2 < bytes.size(); i += 3) {
     const uint32_t v = (static_cast<uint8_t>(bytes[i]) << 16) |
-                       (static_cast<uint8_t>(bytes[i + 1]) << 8) | static_cast<uint8_t>(bytes[i + 2]);
+                       (static_cast<uint8_t>(bytes[i + 1]) << 8) |
+                       static_cast<uint8_t>(bytes[i + 2]);
     for (int k = 3; k >= 0; --k) out.push_back(kAlphabet[(v >> (6 * k)) & 63]);
   }
   if (i < bytes.size()) {
@@ -208,7 +209,8 @@ class PointGrid {
   }
   static uint64_t Key(const Eigen::Vector3i& c) {
     return (static_cast<uint64_t>(c.x() & 0x1FFFFF) << 42) |
-           (static_cast<uint64_t>(c.y() & 0x1FFFFF) << 21) | static_cast<uint64_t>(c.z() & 0x1FFFFF);
+           (static_cast<uint64_t>(c.y() & 0x1FFFFF) << 21) |
+           static_cast<uint64_t>(c.z() & 0x1FFFFF);
   }
   const std::vector<Eigen::Vector3d>& points_;
   double cell_;
@@ -269,7 +271,8 @@ ViewerSummary WriteViewer(const fs::path& reconstruction, const ViewerOptions& o
     std::unordered_map<int, size_t> keyframe_of_image;
     std::unordered_map<std::string, size_t> frame_index;
     for (size_t k = 0; k < model.frame_names.size(); ++k) frame_index[model.frame_names[k]] = k;
-    for (const auto& [id, image] : model.images) keyframe_of_image[id] = frame_index[image.frame_name];
+    for (const auto& [id, image] : model.images)
+      keyframe_of_image[id] = frame_index[image.frame_name];
     std::vector<std::pair<size_t, size_t>> order;  // (keyframe, point)
     for (size_t i = 0; i < model.points.size(); ++i) {
       auto it = keyframe_of_image.find(model.point_first_image[i]);
@@ -314,7 +317,8 @@ ViewerSummary WriteViewer(const fs::path& reconstruction, const ViewerOptions& o
   nlohmann::json scene;
   scene["format"] = 1;
   scene["title"] = fs::absolute(reconstruction).lexically_normal().filename().string();
-  if (scene["title"] == "") scene["title"] = fs::absolute(reconstruction).parent_path().filename().string();
+  if (scene["title"] == "")
+    scene["title"] = fs::absolute(reconstruction).parent_path().filename().string();
   scene["up"] = {0, 0, 1};
   nlohmann::json keyframes = nlohmann::json::array();
   for (size_t k = 0; k < poses.size(); ++k) {
@@ -341,11 +345,13 @@ ViewerSummary WriteViewer(const fs::path& reconstruction, const ViewerOptions& o
       nlohmann::json views(poses.size(), nullptr);  // null: the camera has no image there
       for (const auto& [id, image] : model.images)
         if (image.camera_name == name)
-          views[frame_index[image.frame_name]] = PoseJson(ThreeWorldFromCamera(image.cam_from_world));
-      cameras.push_back({{"name", name},
-                         {"fov_y_deg", model.fov_y_deg.count(camera_id) ? model.fov_y_deg[camera_id] : 60.0},
-                         {"aspect", model.aspect.count(camera_id) ? model.aspect[camera_id] : 1.0},
-                         {"poses", views}});
+          views[frame_index[image.frame_name]] =
+              PoseJson(ThreeWorldFromCamera(image.cam_from_world));
+      cameras.push_back(
+          {{"name", name},
+           {"fov_y_deg", model.fov_y_deg.count(camera_id) ? model.fov_y_deg[camera_id] : 60.0},
+           {"aspect", model.aspect.count(camera_id) ? model.aspect[camera_id] : 1.0},
+           {"poses", views}});
     }
   }
   scene["cameras"] = cameras;
@@ -375,7 +381,8 @@ ViewerSummary WriteViewer(const fs::path& reconstruction, const ViewerOptions& o
     // Each vertex: the nearest SfM point within the radius, or none (a Steiner vertex, or a
     // point that moved since).
     std::vector<long> nearest(closed.vertices.size(), -1);
-    for (size_t i = 0; i < closed.vertices.size(); ++i) nearest[i] = grid.Nearest(closed.vertices[i]);
+    for (size_t i = 0; i < closed.vertices.size(); ++i)
+      nearest[i] = grid.Nearest(closed.vertices[i]);
     TriangleMesh mesh;
     std::vector<int> new_index(closed.vertices.size(), -1);
     for (const Eigen::Vector3i& t : closed.triangles) {

@@ -51,7 +51,8 @@ TEST(Glb, StrictReaderReadsBackTheMeshAndThePoints) {
   }
   ASSERT_EQ(surface.indices.size(), 3 * mesh.triangles.size());
   for (size_t t = 0; t < mesh.triangles.size(); ++t)
-    for (int k = 0; k < 3; ++k) EXPECT_EQ(surface.indices[3 * t + k], static_cast<uint32_t>(mesh.triangles[t][k]));
+    for (int k = 0; k < 3; ++k)
+      EXPECT_EQ(surface.indices[3 * t + k], static_cast<uint32_t>(mesh.triangles[t][k]));
   const testing::GlbPrimitive& points = glb.meshes.at("points");
   EXPECT_EQ(points.mode, 0);
   EXPECT_TRUE(points.indices.empty());
@@ -105,13 +106,16 @@ TEST(Glb, StrictReaderRejectsBrokenFiles) {
   ASSERT_EQ(ReadGlbStrictly(rebuilt(content.json)).error, "");
   nlohmann::json broken = content.json;
   broken["accessors"][0]["max"][0] = broken["accessors"][0]["max"][0].get<double>() + 1.0;
-  EXPECT_EQ(ReadGlbStrictly(rebuilt(broken)).error, "surface: POSITION accessors[0]: max[0] is not the data's");
+  EXPECT_EQ(ReadGlbStrictly(rebuilt(broken)).error,
+            "surface: POSITION accessors[0]: max[0] is not the data's");
   broken = content.json;
   broken["bufferViews"][1]["byteOffset"] = broken["bufferViews"][1]["byteOffset"].get<size_t>() + 2;
-  EXPECT_EQ(ReadGlbStrictly(rebuilt(broken)).error, "surface: COLOR_0 accessors[1]: vertex attribute not aligned to 4 bytes");
+  EXPECT_EQ(ReadGlbStrictly(rebuilt(broken)).error,
+            "surface: COLOR_0 accessors[1]: vertex attribute not aligned to 4 bytes");
   broken = content.json;
   broken["bufferViews"][0]["byteLength"] = broken["buffers"][0]["byteLength"].get<size_t>() + 4;
-  EXPECT_EQ(ReadGlbStrictly(rebuilt(broken)).error, "surface: POSITION accessors[0]: bufferView beyond its buffer");
+  EXPECT_EQ(ReadGlbStrictly(rebuilt(broken)).error,
+            "surface: POSITION accessors[0]: bufferView beyond its buffer");
 }
 
 TEST(Glb, RefusesWhatItCannotWrite) {

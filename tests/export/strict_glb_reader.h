@@ -70,7 +70,8 @@ inline std::string ReadAccessor(const nlohmann::json& gltf, const std::string& b
                                 bool vertex_attribute, std::vector<double>* values,
                                 size_t* components) {
   const std::string where = "accessors[" + std::to_string(index) + "]";
-  if (!gltf.contains("accessors") || index < 0 || index >= static_cast<int>(gltf["accessors"].size()))
+  if (!gltf.contains("accessors") || index < 0 ||
+      index >= static_cast<int>(gltf["accessors"].size()))
     return where + ": no such accessor";
   const nlohmann::json& a = gltf["accessors"][index];
   for (const char* key : {"bufferView", "componentType", "count", "type"})
@@ -78,7 +79,8 @@ inline std::string ReadAccessor(const nlohmann::json& gltf, const std::string& b
   const int component_type = a["componentType"];
   const size_t size = ComponentSize(component_type);
   *components = ComponentCount(a["type"]);
-  if (size == 0) return where + ": componentType " + std::to_string(component_type) + " not allowed";
+  if (size == 0)
+    return where + ": componentType " + std::to_string(component_type) + " not allowed";
   if (*components == 0) return where + ": type " + a["type"].get<std::string>() + " not allowed";
   const size_t count = a["count"];
   if (count == 0) return where + ": count 0";
@@ -86,7 +88,8 @@ inline std::string ReadAccessor(const nlohmann::json& gltf, const std::string& b
   if (view_index < 0 || view_index >= static_cast<int>(gltf["bufferViews"].size()))
     return where + ": bufferView out of range";
   const nlohmann::json& view = gltf["bufferViews"][view_index];
-  if (view.value("buffer", -1) != 0) return where + ": bufferView's buffer is not 0 (the BIN chunk)";
+  if (view.value("buffer", -1) != 0)
+    return where + ": bufferView's buffer is not 0 (the BIN chunk)";
   const size_t view_offset = view.value("byteOffset", 0);
   const size_t view_length = view["byteLength"];
   const size_t buffer_length = gltf["buffers"][0]["byteLength"];
@@ -95,7 +98,8 @@ inline std::string ReadAccessor(const nlohmann::json& gltf, const std::string& b
   const size_t accessor_offset = a.value("byteOffset", 0);
   const size_t element = size * *components;
   const size_t stride = view.value("byteStride", element);
-  if ((view_offset + accessor_offset) % size != 0) return where + ": not aligned to its component size";
+  if ((view_offset + accessor_offset) % size != 0)
+    return where + ": not aligned to its component size";
   if (vertex_attribute && ((view_offset + accessor_offset) % 4 != 0 || stride % 4 != 0))
     return where + ": vertex attribute not aligned to 4 bytes";
   if (accessor_offset + stride * (count - 1) + element > view_length)
@@ -107,11 +111,30 @@ inline std::string ReadAccessor(const nlohmann::json& gltf, const std::string& b
       const char* p = bin.data() + view_offset + accessor_offset + i * stride + k * size;
       double v = 0;
       switch (component_type) {
-        case 5121: v = static_cast<uint8_t>(*p); if (normalized) v /= 255.0; break;
-        case 5123: { uint16_t u; std::memcpy(&u, p, 2); v = normalized ? u / 65535.0 : u; break; }
-        case 5125: { uint32_t u; std::memcpy(&u, p, 4); v = u; break; }
-        case 5126: { float f; std::memcpy(&f, p, 4); v = f; break; }
-        default: return where + ": componentType not read by this reader";
+        case 5121:
+          v = static_cast<uint8_t>(*p);
+          if (normalized) v /= 255.0;
+          break;
+        case 5123: {
+          uint16_t u;
+          std::memcpy(&u, p, 2);
+          v = normalized ? u / 65535.0 : u;
+          break;
+        }
+        case 5125: {
+          uint32_t u;
+          std::memcpy(&u, p, 4);
+          v = u;
+          break;
+        }
+        case 5126: {
+          float f;
+          std::memcpy(&f, p, 4);
+          v = f;
+          break;
+        }
+        default:
+          return where + ": componentType not read by this reader";
       }
       values->push_back(v);
     }
@@ -148,7 +171,8 @@ inline GlbContent ReadGlbStrictly(const std::string& bytes) {
   const uint32_t json_length = U32(bytes, 12);
   if (U32(bytes, 16) != 0x4E4F534A) return fail("the first chunk is not JSON");
   if (json_length % 4 != 0) return fail("JSON chunk length not a multiple of 4");
-  if (20 + static_cast<size_t>(json_length) + 8 > bytes.size()) return fail("JSON chunk beyond the file");
+  if (20 + static_cast<size_t>(json_length) + 8 > bytes.size())
+    return fail("JSON chunk beyond the file");
   const std::string json_text = bytes.substr(20, json_length);
   const size_t bin_header = 20 + json_length;
   const uint32_t bin_length = U32(bytes, bin_header);
@@ -165,7 +189,8 @@ inline GlbContent ReadGlbStrictly(const std::string& bytes) {
   const nlohmann::json& gltf = content.json;
   if (!gltf.contains("asset") || gltf["asset"].value("version", "") != "2.0")
     return fail("asset.version is not 2.0");
-  if (!gltf.contains("buffers") || gltf["buffers"].size() != 1 || gltf["buffers"][0].contains("uri"))
+  if (!gltf.contains("buffers") || gltf["buffers"].size() != 1 ||
+      gltf["buffers"][0].contains("uri"))
     return fail("expected one buffer, the BIN chunk");
   if (!gltf.contains("meshes")) return fail("no meshes");
   // Every node's mesh exists; the scene's nodes exist.
@@ -174,7 +199,8 @@ inline GlbContent ReadGlbStrictly(const std::string& bytes) {
       return fail("a node's mesh out of range");
   for (const nlohmann::json& mesh : gltf["meshes"]) {
     const std::string name = mesh.value("name", "");
-    if (!mesh.contains("primitives") || mesh["primitives"].empty()) return fail(name + ": no primitive");
+    if (!mesh.contains("primitives") || mesh["primitives"].empty())
+      return fail(name + ": no primitive");
     const nlohmann::json& p = mesh["primitives"][0];
     GlbPrimitive primitive;
     primitive.mode = p.value("mode", 4);
@@ -186,10 +212,13 @@ inline GlbContent ReadGlbStrictly(const std::string& bytes) {
     if (std::string e = ReadAccessor(gltf, bin, position, true, &values, &components); !e.empty())
       return fail(name + ": POSITION " + e);
     const nlohmann::json& pa = gltf["accessors"][position];
-    if (pa["componentType"] != 5126 || components != 3) return fail(name + ": POSITION not float VEC3");
-    if (!pa.contains("min") || !pa.contains("max")) return fail(name + ": POSITION without min/max");
+    if (pa["componentType"] != 5126 || components != 3)
+      return fail(name + ": POSITION not float VEC3");
+    if (!pa.contains("min") || !pa.contains("max"))
+      return fail(name + ": POSITION without min/max");
     for (size_t i = 0; i < values.size(); i += 3)
-      primitive.positions.emplace_back(static_cast<float>(values[i]), static_cast<float>(values[i + 1]),
+      primitive.positions.emplace_back(static_cast<float>(values[i]),
+                                       static_cast<float>(values[i + 1]),
                                        static_cast<float>(values[i + 2]));
     if (p["attributes"].contains("COLOR_0")) {
       const int color = p["attributes"]["COLOR_0"];
@@ -213,7 +242,8 @@ inline GlbContent ReadGlbStrictly(const std::string& bytes) {
         return fail(name + ": indices " + e);
       const nlohmann::json& ia = gltf["accessors"][indices];
       const int type = ia["componentType"];
-      if (components != 1 || !(type == 5121 || type == 5123 || type == 5125) || ia.value("normalized", false))
+      if (components != 1 || !(type == 5121 || type == 5123 || type == 5125) ||
+          ia.value("normalized", false))
         return fail(name + ": indices must be unsigned integer SCALAR");
       const nlohmann::json& view = gltf["bufferViews"][ia["bufferView"].get<int>()];
       if (view.contains("byteStride")) return fail(name + ": indices' bufferView has a byteStride");

@@ -214,7 +214,7 @@ async function Main() {
   await page.WaitFor("document.body && document.body.dataset.ready === '1'", 90, 'the scene (body data-ready)');
   console.log('scene ready in ' + ((Date.now() - started) / 1000).toFixed(1) + ' s');
 
-  const scene = await page.Evaluate('({ snapshots: OMNI_SCENE.snapshots.map((s) => s.triangles), triangles: OMNI_SCENE.surface.triangles, keyframes: OMNI_SCENE.keyframes.length, cameras: OMNI_SCENE.cameras.length })');
+  const scene = await page.Evaluate('({ snapshot_keyframes: OMNI_SCENE.snapshots.map((s) => s.keyframe), loop_keyframes: OMNI_SCENE.loop_closures.map((l) => l.keyframe), snapshots: OMNI_SCENE.snapshots.map((s) => s.triangles), triangles: OMNI_SCENE.surface.triangles, keyframes: OMNI_SCENE.keyframes.length, cameras: OMNI_SCENE.cameras.length })');
   const triangles_shown = async () => +(await page.Evaluate("document.getElementById('triangle-count').textContent"));
   Check(await triangles_shown() === scene.triangles, 'the page shows the final surface: ' + scene.triangles + ' triangles');
   Check(scene.snapshots.length >= 2, scene.snapshots.length + ' snapshots in the slider');
@@ -244,6 +244,17 @@ async function Main() {
   Check(scene.snapshots[0] !== scene.snapshots[last] && await triangles_shown() === scene.snapshots[last], 'slider at the last snapshot: ' + scene.snapshots[last] + ' triangles shown');
   const last_shot = await page.Screenshot(path.join(args.work, 'viewer_snapshot_last.png'));
   Check(DifferentShare(first_shot, last_shot) > 0.01, 'the first and the last snapshots look different (' + (100 * DifferentShare(first_shot, last_shot)).toFixed(1) + '% of the view)');
+
+  // The first snapshot after a loop closure says that the surface was re-sculpted; the one
+  // before it does not.
+  const after_loop = scene.loop_keyframes.length ? scene.snapshot_keyframes.findIndex((k) => k >= scene.loop_keyframes[0]) : -1;
+  Check(after_loop > 0, 'a snapshot before and one after the first loop closure (keyframe ' + scene.loop_keyframes[0] + ')');
+  if (after_loop > 0) {
+    const badge = async (i) => { await move_slider(i); return page.Evaluate("!document.getElementById('replay-badge').hidden && document.getElementById('time-label').textContent.includes('re-sculpting')"); };
+    Check(!(await badge(after_loop - 1)) && await badge(after_loop), 'the snapshot after the loop closure shows the re-sculpting, the one before does not');
+    await page.WaitFor("+document.getElementById('triangle-count').textContent === " + scene.snapshots[after_loop], 30, 'the snapshot after the loop closure');
+    await page.Screenshot(path.join(args.work, 'viewer_after_loop_closure.png'));
+  }
 
   // Play: the slider moves by itself.
   await move_slider(0);

@@ -69,8 +69,8 @@ std::string Base64Decoded(const std::string& text) {
 // The value a data script of the viewer assigns: "window.X = <json>;" or "...[key] = <json>;".
 nlohmann::json ScriptValue(const fs::path& script) {
   const std::string text = ReadBytes(script);
-  const size_t equals = text.rfind("] = ") != std::string::npos ? text.rfind("] = ") + 4
-                                                                 : text.find(" = ") + 3;
+  const size_t equals =
+      text.rfind("] = ") != std::string::npos ? text.rfind("] = ") + 4 : text.find(" = ") + 3;
   return nlohmann::json::parse(text.substr(equals, text.rfind(';') - equals));
 }
 
@@ -90,8 +90,8 @@ TEST(ExportViewerReconstruction, GlbMatchesSurfacePlyAndPointsPly) {
   testing::TempDir dir;
   for (const bool closed : {false, true}) {
     const fs::path glb_file = dir / (closed ? "closed.glb" : "surface.glb");
-    std::vector<std::string> arguments = {"--quiet", "export", kReconstruction.string(),
-                                          "--format", "glb", "--out", glb_file.string()};
+    std::vector<std::string> arguments = {"--quiet", "export", kReconstruction.string(), "--format",
+                                          "glb",     "--out",  glb_file.string()};
     if (closed) arguments.push_back("--closed");
     const CommandResult run = RunOmnisculpt(arguments, dir.path());
     ASSERT_EQ(run.exit_code, 0) << run.err;
@@ -146,7 +146,8 @@ TEST(ExportViewerReconstruction, RefusesToOverwriteAndBadInput) {
   const fs::path target = dir / "keep.glb";
   testing::WriteBytes(target, "the user's file");
   CommandResult run = RunOmnisculpt(
-      {"export", kReconstruction.string(), "--format", "glb", "--out", target.string()}, dir.path());
+      {"export", kReconstruction.string(), "--format", "glb", "--out", target.string()},
+      dir.path());
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_EQ(testing::SplitText(run.err).size(), 1u) << run.err;
   EXPECT_NE(run.err.find(target.string()), std::string::npos) << run.err;
@@ -172,7 +173,8 @@ TEST(ExportViewerReconstruction, ViewWritesTheDataOfTheReconstruction) {
   // Keyframes: those of poses.tum, with the points seen so far growing to all of them.
   const std::vector<StampedPose> poses = ReadTum(rec / "poses.tum");
   ASSERT_EQ(scene["keyframes"].size(), poses.size());
-  EXPECT_EQ(scene["keyframes"][5]["pose"][0].get<double>(), poses[5].world_from_rig.translation.x());
+  EXPECT_EQ(scene["keyframes"][5]["pose"][0].get<double>(),
+            poses[5].world_from_rig.translation.x());
   size_t previous = 0;
   for (const nlohmann::json& k : scene["keyframes"]) {
     EXPECT_GE(k["points"].get<size_t>(), previous);
@@ -273,7 +275,8 @@ TEST(ExportViewerReconstruction, ServePrintsTheAddressAndServesTheViewerOnly) {
   while (read(out[0], &c, 1) == 1 && c != '\n') line.push_back(c);
   close(out[0]);
   std::smatch match;
-  const bool printed = std::regex_search(line, match, std::regex("http://127\\.0\\.0\\.1:([0-9]+)/index\\.html"));
+  const bool printed =
+      std::regex_search(line, match, std::regex("http://127\\.0\\.0\\.1:([0-9]+)/index\\.html"));
   std::string index, escape, script;
   if (printed) {
     const int port = std::stoi(match[1]);
@@ -290,7 +293,8 @@ TEST(ExportViewerReconstruction, ServePrintsTheAddressAndServesTheViewerOnly) {
   EXPECT_EQ(index.substr(index.find("\r\n\r\n") + 4), page);
   EXPECT_EQ(escape.substr(0, 22), "HTTP/1.0 404 Not Found");
   EXPECT_NE(script.find("Content-Type: text/javascript"), std::string::npos);
-  EXPECT_EQ(script.substr(script.find("\r\n\r\n") + 4), ReadBytes(rec / "viewer" / "data" / "scene.js"));
+  EXPECT_EQ(script.substr(script.find("\r\n\r\n") + 4),
+            ReadBytes(rec / "viewer" / "data" / "scene.js"));
 }
 
 TEST(ExportViewerReconstruction, ServeOnATakenPortIsBadInput) {

@@ -42,6 +42,8 @@ int RunCommandLine(int argc, char** argv) {
   RegisterSurfaceCommand(app, global);
   RegisterEvalCommands(app, global);
   RegisterReconstructCommand(app, global);
+  RegisterViewCommand(app, global);
+  RegisterExportCommand(app, global);
 
   app.parse_complete_callback([&global] {
     spdlog::set_pattern("%^[%L]%$ %v");

@@ -40,6 +40,8 @@ void RegisterEvalCommands(CLI::App& app, const GlobalOptions& global);
 void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global);
+void RegisterViewCommand(CLI::App& app, const GlobalOptions& global);
+void RegisterExportCommand(CLI::App& app, const GlobalOptions& global);
 
 // The enclosing-set options of the surface that `surface` and `reconstruct` both take
 // (--enclosing ball|conflict and the tuning of conflict), registered on `command`;

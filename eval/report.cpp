@@ -576,6 +576,8 @@ std::string EvalSummaryToMarkdown(const EvalSummary& s) {
   md << "| errors above 600 cm | " << Fixed(100.0 * r.share_above_large, 1) << " % | "
      << Fixed(100.0 * kPaperShareAbove6m, 0) << " % |\n"
      << "| triangles | " << s.estimated_mesh.triangles << " | " << kPaperTriangles << " |\n\n";
+  md << "In 3-D: [the viewer](../viewer/index.html) (written beside this report's folder by "
+        "`omnisculpt view REC`; the surface, the trajectory, the sculpting played back).\n\n";
 
   md << "## Poses\n\n"
      << "| | |\n|---|---|\n"

@@ -15,10 +15,11 @@ set(layer_raycast  calib raycast)                     # omni_raycast
 set(layer_eval     calib raycast surface eval)        # omni_eval
 set(layer_synth    calib raycast synth)               # omni_synth
 set(layer_pipeline calib sfm surface raycast pipeline)  # omni_pipeline, the controllers
-set(layer_apps     calib sfm surface raycast eval synth pipeline apps)  # the command line
+set(layer_export   calib export)                      # omni_export: glTF, OBJ, the web viewer's folder
+set(layer_apps     calib sfm surface raycast eval synth pipeline export apps)  # the command line
 # -------------------------------------------------------------------------------------------------
 
-set(folders calib sfm surface raycast eval synth pipeline apps)
+set(folders calib sfm surface raycast eval synth pipeline export apps)
 
 if(NOT DEFINED ROOT OR ROOT STREQUAL "")
   message(FATAL_ERROR "check_layering: give the source tree: cmake -DROOT=<tree> -P ${CMAKE_CURRENT_LIST_FILE}")

@@ -12,6 +12,12 @@ packages=(
   libopengv-dev libembree-dev libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev libyaml-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
 )
+# The web viewer (`omnisculpt view`): npm installs the pinned three.js of viewer/package-lock.json
+# at build time (into the build folder); its browser test runs Debian's chromium, headless.
+# Node and npm count as present when their commands are (a node from elsewhere brings npm).
+command -v node >/dev/null 2>&1 || packages+=(nodejs)
+command -v npm >/dev/null 2>&1 || packages+=(npm)
+command -v chromium >/dev/null 2>&1 || packages+=(chromium fonts-liberation)
 
 missing=()
 for p in "${packages[@]}"; do

@@ -47,6 +47,8 @@ void RegisterExportCommand(CLI::App& app, const GlobalOptions& global);
 // (--enclosing ball|conflict and the tuning of conflict), registered on `command`;
 // ApplyEnclosingOption sets sculptor->enclosing from the --enclosing value (InputError if bad).
 void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOptions* sculptor);
+// The carving options beyond the paper (SculptorOptions::enclosed_free_neighbours).
+void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor);
 void ApplyEnclosingOption(const std::string& enclosing, SculptorOptions* sculptor);
 // The options of the observed surface, surface.ply (ObservedMeshOptions), shared by surface and
 // reconstruct.

@@ -176,6 +176,8 @@ void RegisterEval(CLI::App& app) {
                     "match poses by frame index (timestamp = index) instead of timestamp");
   command->add_flag("!--no-plots", options->eval.plots, "skip the gnuplot plots");
   command->add_flag("!--no-renders", options->eval.renders, "skip the renders");
+  command->add_flag("!--no-closed", options->eval.closed_surface,
+                    "skip the figures of REC/surface_closed.ply (the closed surface)");
   command->callback([options] {
     EvalOptions eval = options->eval;
     eval.surfaces.seed = eval.ray_errors.seed + 1;
@@ -204,6 +206,17 @@ void RegisterEval(CLI::App& app) {
         "pixel tail above %.2f m: %.1f %% of both hits (in front %.1f %%, behind %.1f %%)\n",
         r.pixel_tail_error, 100.0 * r.pixel.tail, 100.0 * r.pixel.tail_front,
         100.0 * r.pixel.tail_behind);
+    if (summary.has_closed) {
+      const RayErrorResult& c = summary.closed_ray_errors;
+      std::printf("surface_closed.ply: q90 %.0f cm, above 600 cm %.1f %%, pixel F-score",
+                  100.0 * (c.quantiles.empty() ? 0.0 : c.quantiles.back()),
+                  100.0 * c.share_above_large);
+      for (const PixelPrecisionRecall& pr : c.pixel.precision_recall) {
+        std::printf(" %.3f at %.2f m", pr.f_score, pr.threshold);
+      }
+      std::printf(", tail %.1f %% (in front %.1f %%)\n", 100.0 * c.pixel.tail,
+                  100.0 * c.pixel.tail_front);
+    }
     if (summary.pipeline.present) {
       const EvalPipeline& pipeline = summary.pipeline;
       std::printf(

@@ -372,6 +372,7 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   AddSfmOptions(command, &o->sfm);
   AddEnclosingOptions(command, &o->enclosing, &o->pipeline.sculptor);
+  AddCarvingOptions(command, &o->pipeline.sculptor);
   AddObservedMeshOptions(command, &o->pipeline.sculptor.observed);
   command->callback([o, &global] { RunReconstruct(*o, global); });
 }

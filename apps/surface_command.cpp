@@ -16,13 +16,13 @@
 #include <vector>
 
 #include "apps/commands.h"
-#include "pipeline/colmap_keyframes.h"
-#include "pipeline/gt_keyframes.h"
 #include "calib/atomic_file.h"
 #include "calib/error.h"
 #include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
+#include "pipeline/colmap_keyframes.h"
+#include "pipeline/gt_keyframes.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -231,6 +231,19 @@ void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOpti
       "vertex stars");
 }
 
+void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
+  command
+      ->add_option("--enclosed-free", sculptor->enclosed_free_neighbours,
+                   "A cell that no ray crossed with this many of its 4 neighbours crossed joins "
+                   "the free space before the growth (0: off; 2, 3 or 4)")
+      ->capture_default_str();
+  command
+      ->add_option("--enclosed-free-rounds", sculptor->enclosed_free_rounds,
+                   "--enclosed-free: rounds, each over the neighbours of the cells the last one "
+                   "freed")
+      ->capture_default_str();
+}
+
 void AddObservedMeshOptions(CLI::App* command, ObservedMeshOptions* observed) {
   command
       ->add_option("--observed-max-edge", observed->max_edge_factor,
@@ -273,6 +286,7 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       "stats/keyframes.csv)");
   AddEnclosingOptions(command, &o->enclosing, &o->sculptor);
   AddObservedMeshOptions(command, &o->sculptor.observed);
+  AddCarvingOptions(command, &o->sculptor);
   command
       ->add_option("--grow-closure-rounds", o->sculptor.grow_closure_rounds,
                    "conflict E: rounds of growth over the free cells around the vertices whose "

@@ -67,6 +67,42 @@ nlohmann::json PixelScoresJson(const PixelScores& p) {
   return json;
 }
 
+nlohmann::json RayErrorsJson(const RayErrorResult& r) {
+  nlohmann::json quantiles = nlohmann::json::object();
+  for (size_t i = 0; i < r.quantile_levels.size(); ++i) {
+    quantiles["q" + std::to_string(std::lround(100 * r.quantile_levels[i]))] = r.quantiles[i];
+  }
+  return {{"sampled_pixels", r.sampled_pixels}, {"rays", r.rays},
+          {"estimated_hits", r.estimated_hits}, {"gt_hits", r.gt_hits},
+          {"both_hits", r.both_hits},           {"share_estimated_hit", r.share_estimated_hit},
+          {"share_gt_hit", r.share_gt_hit},     {"share_both_hit", r.share_both_hit},
+          {"quantiles_m", quantiles},           {"share_above_6m", r.share_above_large},
+          {"errors_m", StatsJson(r.errors)}};
+}
+
+// The pixel figures of all cameras, with those of each camera under "cameras".
+nlohmann::json PixelJson(const RayErrorResult& r) {
+  nlohmann::json json = PixelScoresJson(r.pixel);
+  json["tail_error_m"] = r.pixel_tail_error;
+  json["cameras"] = nlohmann::json::array();
+  for (const PixelScores& camera : r.pixel_cameras)
+    json["cameras"].push_back(PixelScoresJson(camera));
+  return json;
+}
+
+nlohmann::json SurfacesJson(const SurfaceCompareResult& s) {
+  nlohmann::json prf = nlohmann::json::array();
+  for (const PrecisionRecall& x : s.precision_recall) {
+    prf.push_back({{"threshold_m", x.threshold},
+                   {"precision", x.precision},
+                   {"recall", x.recall},
+                   {"f_score", x.f_score}});
+  }
+  return {{"estimated_samples", s.estimated_samples},    {"gt_samples", s.gt_samples},
+          {"gt_samples_seen", s.gt_samples_seen},        {"accuracy_m", StatsJson(s.accuracy)},
+          {"completeness_m", StatsJson(s.completeness)}, {"precision_recall", prf}};
+}
+
 nlohmann::json Sim3Json(const Sim3d& s) {
   return {{"scale", s.scale},
           {"q_wxyz", {s.rotation.w(), s.rotation.x(), s.rotation.y(), s.rotation.z()}},
@@ -402,6 +438,18 @@ EvalSummary RunEvaluation(const fs::path& drive, const fs::path& rec, const fs::
                summary.ray_errors.errors.median);
   summary.surfaces = CompareSurfaces(estimated_mesh, estimated_caster, gt_mesh, gt_caster, rig,
                                      gt_keyframes, options.surfaces);
+  const fs::path closed_path = rec / "surface_closed.ply";
+  if (options.closed_surface && fs::exists(closed_path)) {
+    TriangleMesh closed_mesh = ReadPlyMesh(closed_path);
+    summary.closed_mesh = WithFile(closed_path, [&] { return CheckMesh(closed_mesh); });
+    for (Eigen::Vector3d& v : closed_mesh.vertices) v = gt_from_estimated * v;
+    const RayCaster closed_caster = WithFile(closed_path, [&] { return RayCaster(closed_mesh); });
+    summary.closed_ray_errors =
+        EvaluateRayErrors(rig, keyframes, closed_caster, gt_caster, options.ray_errors);
+    summary.closed_surfaces = CompareSurfaces(closed_mesh, closed_caster, gt_mesh, gt_caster, rig,
+                                              gt_keyframes, options.surfaces);
+    summary.has_closed = true;
+  }
   if (fs::exists(points_path)) {
     PointCloud cloud = ReadPlyPoints(points_path);
     for (Eigen::Vector3d& p : cloud.points) p = gt_from_estimated * p;
@@ -474,37 +522,20 @@ std::string EvalSummaryToJson(const EvalSummary& s) {
                    {"scale_drift", drift},
                    {"scale_drift_min", p.scale_drift_min},
                    {"scale_drift_max", p.scale_drift_max}};
-  const RayErrorResult& r = s.ray_errors;
-  nlohmann::json quantiles = nlohmann::json::object();
-  for (size_t i = 0; i < r.quantile_levels.size(); ++i) {
-    quantiles["q" + std::to_string(std::lround(100 * r.quantile_levels[i]))] = r.quantiles[i];
+  json["ray_errors"] = RayErrorsJson(s.ray_errors);
+  json["pixel"] = PixelJson(s.ray_errors);
+  json["surfaces"] = SurfacesJson(s.surfaces);
+  if (s.has_closed) {
+    json["closed_surface"] = {{"file", "surface_closed.ply"},
+                              {"mesh",
+                               {{"ok", s.closed_mesh.ok},
+                                {"closed_manifold", s.closed_mesh.closed_manifold},
+                                {"vertices", s.closed_mesh.vertices},
+                                {"triangles", s.closed_mesh.triangles}}},
+                              {"ray_errors", RayErrorsJson(s.closed_ray_errors)},
+                              {"pixel", PixelJson(s.closed_ray_errors)},
+                              {"surfaces", SurfacesJson(s.closed_surfaces)}};
   }
-  json["ray_errors"] = {
-      {"sampled_pixels", r.sampled_pixels}, {"rays", r.rays},
-      {"estimated_hits", r.estimated_hits}, {"gt_hits", r.gt_hits},
-      {"both_hits", r.both_hits},           {"share_estimated_hit", r.share_estimated_hit},
-      {"share_gt_hit", r.share_gt_hit},     {"share_both_hit", r.share_both_hit},
-      {"quantiles_m", quantiles},           {"share_above_6m", r.share_above_large},
-      {"errors_m", StatsJson(r.errors)}};
-  json["pixel"] = PixelScoresJson(r.pixel);
-  json["pixel"]["tail_error_m"] = r.pixel_tail_error;
-  json["pixel"]["cameras"] = nlohmann::json::array();
-  for (const PixelScores& camera : r.pixel_cameras) {
-    json["pixel"]["cameras"].push_back(PixelScoresJson(camera));
-  }
-  nlohmann::json prf = nlohmann::json::array();
-  for (const PrecisionRecall& x : s.surfaces.precision_recall) {
-    prf.push_back({{"threshold_m", x.threshold},
-                   {"precision", x.precision},
-                   {"recall", x.recall},
-                   {"f_score", x.f_score}});
-  }
-  json["surfaces"] = {{"estimated_samples", s.surfaces.estimated_samples},
-                      {"gt_samples", s.surfaces.gt_samples},
-                      {"gt_samples_seen", s.surfaces.gt_samples_seen},
-                      {"accuracy_m", StatsJson(s.surfaces.accuracy)},
-                      {"completeness_m", StatsJson(s.surfaces.completeness)},
-                      {"precision_recall", prf}};
   if (s.has_points) {
     nlohmann::json q = nlohmann::json::object();
     for (size_t i = 0; i < s.points.quantile_levels.size(); ++i) {
@@ -557,6 +588,52 @@ std::string EvalSummaryToJson(const EvalSummary& s) {
   json["images"] = s.images;
   return json.dump(2);
 }
+
+namespace {
+
+// The observed surface (surface.ply) beside the closed δO (surface_closed.ply).
+void ClosedSurfaceMarkdown(const EvalSummary& s, std::ostringstream& md) {
+  const RayErrorResult &o = s.ray_errors, &c = s.closed_ray_errors;
+  md << "\n## surface.ply against surface_closed.ply\n\n"
+     << "surface.ply is the observed surface, surface_closed.ply the closed δO it is cut from "
+        "(its ceiling over the streets and its caps are hit by every pixel).\n\n"
+     << "| figure | surface.ply | surface_closed.ply |\n|---|---|---|\n";
+  auto both = [&md](const std::string& name, const std::string& a, const std::string& b) {
+    md << "| " << name << " | " << a << " | " << b << " |\n";
+  };
+  both("triangles", std::to_string(s.estimated_mesh.triangles),
+       std::to_string(s.closed_mesh.triangles));
+  both("oriented 2-manifold (surface.ply: with boundary allowed; closed: closed)",
+       s.estimated_mesh.ok ? "yes" : "no", s.closed_mesh.ok ? "yes" : "no");
+  both("pixels with an estimated hit", Fixed(100.0 * o.share_estimated_hit, 1) + " %",
+       Fixed(100.0 * c.share_estimated_hit, 1) + " %");
+  for (size_t i = 0; i < o.quantile_levels.size() && i < c.quantiles.size(); ++i) {
+    const long level = std::lround(100 * o.quantile_levels[i]);
+    if (level != 50 && level != 90) continue;
+    both("q" + std::to_string(level) + " (cm)", Cm(o.quantiles[i]), Cm(c.quantiles[i]));
+  }
+  both("errors above 600 cm", Fixed(100.0 * o.share_above_large, 1) + " %",
+       Fixed(100.0 * c.share_above_large, 1) + " %");
+  for (size_t i = 0; i < o.pixel.precision_recall.size() && i < c.pixel.precision_recall.size();
+       ++i) {
+    const PixelPrecisionRecall &a = o.pixel.precision_recall[i], &b = c.pixel.precision_recall[i];
+    both("pixel P / R / F at " + Cm(a.threshold) + " cm",
+         Fixed(a.precision, 3) + " / " + Fixed(a.recall, 3) + " / " + Fixed(a.f_score, 3),
+         Fixed(b.precision, 3) + " / " + Fixed(b.recall, 3) + " / " + Fixed(b.f_score, 3));
+  }
+  both("pixel tail (in front / behind)",
+       Fixed(100.0 * o.pixel.tail, 1) + " % (" + Fixed(100.0 * o.pixel.tail_front, 1) + " / " +
+           Fixed(100.0 * o.pixel.tail_behind, 1) + ")",
+       Fixed(100.0 * c.pixel.tail, 1) + " % (" + Fixed(100.0 * c.pixel.tail_front, 1) + " / " +
+           Fixed(100.0 * c.pixel.tail_behind, 1) + ")");
+  const auto &so = s.surfaces.precision_recall, &sc = s.closed_surfaces.precision_recall;
+  for (size_t i = 0; i < so.size() && i < sc.size(); ++i) {
+    both("surface F-score at " + Cm(so[i].threshold) + " cm", Fixed(so[i].f_score, 3),
+         Fixed(sc[i].f_score, 3));
+  }
+}
+
+}  // namespace
 
 std::string EvalSummaryToMarkdown(const EvalSummary& s) {
   std::ostringstream md;
@@ -658,6 +735,7 @@ std::string EvalSummaryToMarkdown(const EvalSummary& s) {
   };
   for (const PixelScores& camera : r.pixel_cameras) pixel_row(camera.camera, camera);
   pixel_row("**all**", r.pixel);
+  if (s.has_closed) ClosedSurfaceMarkdown(s, md);
   if (s.pipeline.present) {
     const EvalPipeline& pl = s.pipeline;
     md << "\n## Pipeline (reconstruct.json)\n\n"

@@ -20,7 +20,8 @@ struct EvalOptions {
   RayErrorOptions ray_errors;
   SurfaceCompareOptions surfaces;
   RenderOptions render;
-  bool plots = true;  // gnuplot; skipped with a warning when gnuplot is missing
+  bool plots = true;           // gnuplot; skipped with a warning when gnuplot is missing
+  bool closed_surface = true;  // also evaluate REC/surface_closed.ply when it exists
   bool renders = true;
   int render_width = 800;           // bird's-eye views
   int keyframe_views = 3;           // keyframes rendered from the estimate and the ground truth
@@ -74,12 +75,20 @@ struct EvalSummary {
   EvalPipeline pipeline;
   MeshCheckReport estimated_mesh;
   MeshCheckReport gt_mesh;
+  // REC/surface_closed.ply (the closed δO beside the observed surface.ply), when it exists and
+  // EvalOptions::closed_surface: the same ray-traced and surface-against-surface figures, and
+  // its mesh check (a closed oriented 2-manifold expected).
+  bool has_closed = false;
+  RayErrorResult closed_ray_errors;
+  SurfaceCompareResult closed_surfaces;
+  MeshCheckReport closed_mesh;
   std::vector<std::string> warnings;
   std::vector<std::string> images;  // written, relative to the report folder
 };
 
 // Reads DRIVE/rig.json, DRIVE/gt/poses.tum, DRIVE/gt/mesh.ply, OUT/poses.tum, OUT/surface.ply,
-// OUT/points.ply (optional) and OUT/stats/keyframes.csv (optional), and writes the report into
+// OUT/surface_closed.ply, OUT/points.ply and OUT/stats/keyframes.csv (the last three optional),
+// and writes the report into
 // report_dir (created). Throws InputError on missing or mismatched inputs.
 EvalSummary RunEvaluation(const std::filesystem::path& drive, const std::filesystem::path& rec,
                           const std::filesystem::path& report_dir, const EvalOptions& options);

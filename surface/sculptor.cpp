@@ -50,6 +50,11 @@ std::string SculptorOptions::Check() const {
   if (enclosing_star_rings < 1) return "enclosing_star_rings must be >= 1";
   if (grow_closure_rounds < 0) return "grow_closure_rounds must be >= 0";
   if (!(ray_grid_step_factor > 0.0)) return "ray_grid_step_factor must be > 0";
+  if (enclosed_free_neighbours != 0 &&
+      (enclosed_free_neighbours < 2 || enclosed_free_neighbours > 4)) {
+    return "enclosed_free_neighbours must be 0 (off), 2, 3 or 4";
+  }
+  if (enclosed_free_rounds < 1) return "enclosed_free_rounds must be >= 1";
   // The parts' Check() name their fields with the prefix already ("genus.max_group_cells").
   for (const std::string& problem : {genus.Check(), smoothing.Check(), observed.Check()}) {
     if (!problem.empty()) return problem;
@@ -67,7 +72,7 @@ std::string KeyframeStatsCsvHeader() {
          "points_filtered_length,points_filtered_aperture,enclose_rounds,cells_e_added,"
          "cells_active,smoothing_candidates,cells_grow_extra,old_ray_facets,"
          "old_ray_facets_uncrossed,old_ray_queries,old_ray_query_voxels,old_ray_facet_tests,"
-         "old_ray_plane_passes";
+         "old_ray_plane_passes,cells_enclosed_free,ms_enclosed_free";
 }
 
 std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
@@ -87,7 +92,7 @@ std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
     << ',' << s.cells_e_added << ',' << s.cells_active << ',' << s.smoothing_candidates << ','
     << s.cells_grow_extra << ',' << s.old_ray_facets << ',' << s.old_ray_facets_uncrossed << ','
     << s.old_ray_queries << ',' << s.old_ray_query_voxels << ',' << s.old_ray_facet_tests << ','
-    << s.old_ray_plane_passes;
+    << s.old_ray_plane_passes << ',' << s.cells_enclosed_free << ',' << s.ms_enclosed_free;
   return o.str();
 }
 
@@ -1047,6 +1052,43 @@ struct IncrementalSculptor::Impl {
     st.triangles = t.num_triangles;
   }
 
+  // SculptorOptions::enclosed_free_neighbours: the cells out of F among `cells` and their
+  // neighbours with that many neighbours in F join F. Returns how many.
+  size_t FreeEnclosedCells(const std::vector<CellHandle>& cells) {
+    if (options.enclosed_free_neighbours <= 0) return 0;
+    std::vector<CellHandle> candidates, joined, frontier = cells;
+    size_t total = 0;
+    for (int round = 0; round < options.enclosed_free_rounds && !frontier.empty(); ++round) {
+      const uint32_t mark = t.NewMark();
+      candidates.clear();
+      auto consider = [&](CellHandle c) {
+        if (c->info().mark == mark || t.tri.is_infinite(c) || c->info().counter > 0) return;
+        c->info().mark = mark;
+        candidates.push_back(c);
+      };
+      for (const CellHandle& c : frontier) {
+        consider(c);
+        for (int i = 0; i < 4; ++i) consider(c->neighbor(i));
+      }
+      joined.clear();
+      for (const CellHandle& c : candidates) {
+        int free = 0;
+        for (int i = 0; i < 4; ++i) {
+          const CellHandle nb = c->neighbor(i);
+          free += !t.tri.is_infinite(nb) && nb->info().counter > 0 ? 1 : 0;
+        }
+        if (free >= options.enclosed_free_neighbours) joined.push_back(c);
+      }
+      // Decided on the counters before the round's changes: the result does not depend on the
+      // order of the cells.
+      for (const CellHandle& c : joined) c->info().counter = 1;
+      t.num_f += joined.size();
+      total += joined.size();
+      frontier = joined;
+    }
+    return total;
+  }
+
   int AddPoint(const SurfacePoint& p, VertexHandle v, KeyframeRecord& kf) {
     v = t.AddVertex(v, static_cast<int32_t>(points.size()), false);
     PointRecord rec;
@@ -1186,6 +1228,9 @@ struct IncrementalSculptor::Impl {
     tick = Clock::now();
     if (options.enclosing == EnclosingMode::kBall) surviving = CellsInBall(kf.centre, r + l);
     std::vector<CellHandle> active = ActiveCells(n_cells, surviving);
+    const auto enclosed_tick = Clock::now();
+    st.cells_enclosed_free = FreeEnclosedCells(active);
+    st.ms_enclosed_free = MsSince(enclosed_tick);
     BeginAttemptPhase();
     Grow(active);
     if (options.enclosing == EnclosingMode::kConflictZones) GrowAroundChanges(active, st);
@@ -1262,6 +1307,9 @@ struct IncrementalSculptor::Impl {
     for (const KeyframeRecord& kf : keyframes) RegisterRays(kf);
     st.ms_rays = MsSince(tick);
     tick = Clock::now();
+    const auto enclosed_tick = Clock::now();
+    st.cells_enclosed_free = FreeEnclosedCells(all);
+    st.ms_enclosed_free = MsSince(enclosed_tick);
     BeginAttemptPhase();
     Grow(all);
     st.ms_grow = MsSince(tick);

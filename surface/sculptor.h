@@ -171,6 +171,15 @@ struct SculptorOptions {
   // The observed part of δO (ExtractObservedMesh, surface.ply); the sculpting ignores it.
   ObservedMeshOptions observed;
 
+  // Carving beyond the paper (docs/design.md §6).
+  // A cell that no ray crossed with at least this many of its four neighbours in F joins F (its
+  // counter set to 1) before the growth: matter that no point bounds, enclosed by carved space
+  // (the thin cells in front of a wall between the rays' ends, which a ray ending exactly at a
+  // vertex does not cross). 0: off; 2, 3 or 4. On the short drive (--from-gt) 3 halves the
+  // errors above 1 m in front of the ground truth, 2 carves into the walls (docs/figures.md F14).
+  int enclosed_free_neighbours = 3;
+  int enclosed_free_rounds = 1;  // repeated on the neighbours of the cells that joined F
+
   std::string Check() const;
 };
 
@@ -234,6 +243,9 @@ struct KeyframeStats {
   // (subtraction/addition tests, several-at-once attempts; 0 with reference_manifold_tests).
   // Not in the CSV row.
   size_t single_tests_skipped = 0, attempts_skipped = 0;
+  // SculptorOptions::enclosed_free_neighbours: cells that joined F without a ray.
+  size_t cells_enclosed_free = 0;
+  double ms_enclosed_free = 0;  // their search, inside ms_grow
 };
 
 // Colours the vertices of a mesh of the sculptor (vertex_points from ExtractMesh or

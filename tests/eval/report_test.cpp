@@ -130,14 +130,19 @@ TEST_F(EvalTest, MissingGnuplotOnlyWarns) {
   EXPECT_FALSE(fs::exists(root_ / "report" / "error_cdf.png"));
 }
 
-TEST_F(EvalTest, SurfaceShiftedTenCentimetresAlongItsNormals) {
-  // The street's blocks are boxes: shrink each by 10 cm on every face, and the enclosing box
-  // too (inwards, its normals' direction).
+// The street of EvalTest with its blocks (boxes) shrunk by 10 cm on every face, and the
+// enclosing box too (inwards, its normals' direction).
+TriangleMesh ShrunkStreet() {
   TriangleMesh shifted = FlipOrientation(MakeBox({-19.9, -19.9, -0.9}, {79.9, 19.9, 29.9}));
   for (int i = 0; i < 5; ++i) {
     AppendMesh(MakeBox({i * 12.0 + 0.1, 6.1, -0.9}, {i * 12.0 + 8.9, 11.9, 7.9 + i}), &shifted);
     AppendMesh(MakeBox({i * 12.0 + 3.1, -11.9, -0.9}, {i * 12.0 + 10.9, -6.1, 9.9 - i}), &shifted);
   }
+  return shifted;
+}
+
+TEST_F(EvalTest, SurfaceShiftedTenCentimetresAlongItsNormals) {
+  const TriangleMesh shifted = ShrunkStreet();
   WriteReconstruction(kEstimatedFromGt, shifted);
   EvalOptions options = SmallOptions();
   options.plots = options.renders = false;
@@ -147,6 +152,44 @@ TEST_F(EvalTest, SurfaceShiftedTenCentimetresAlongItsNormals) {
   EXPECT_NEAR(summary.ray_errors.quantiles[0], 0.1, 0.02);  // q10: rays that meet walls square
   EXPECT_GT(summary.ray_errors.quantiles[4], 0.1 - 2e-3);
   EXPECT_DOUBLE_EQ(summary.surfaces.precision_recall[1].precision, 1.0);  // all within 0.5 m
+}
+
+// surface_closed.ply, when the folder has it, is scored beside surface.ply: here surface.ply is
+// the ground truth itself and surface_closed.ply its blocks shrunk by 10 cm.
+TEST_F(EvalTest, ClosedSurfaceIsScoredBesideTheObservedOne) {
+  TriangleMesh shifted = ShrunkStreet();
+  WriteReconstruction(kEstimatedFromGt, gt_mesh_);
+  for (auto& v : shifted.vertices) v = kEstimatedFromGt * v;
+  WritePlyMesh(shifted, rec_ / "surface_closed.ply");
+  EvalOptions options = SmallOptions();
+  options.plots = options.renders = false;
+  const EvalSummary summary = RunEvaluation(drive_, rec_, root_ / "report", options);
+  ASSERT_TRUE(summary.has_closed);
+  EXPECT_TRUE(summary.closed_mesh.ok);
+  EXPECT_EQ(summary.closed_mesh.triangles, static_cast<long>(shifted.triangles.size()));
+  EXPECT_NEAR(summary.surfaces.accuracy.median, 0.0, 2e-3);
+  EXPECT_NEAR(summary.closed_surfaces.accuracy.median, 0.1, 2e-3);
+  ASSERT_EQ(summary.closed_ray_errors.pixel.precision_recall.size(), 2u);
+  // The observed one is exact; the closed one is about 10 cm off wherever a ray meets it.
+  EXPECT_DOUBLE_EQ(summary.ray_errors.pixel.precision_recall[0].precision, 1.0);
+  EXPECT_GT(summary.closed_ray_errors.quantiles[0], 0.1 - 0.02);
+  const nlohmann::json json = nlohmann::json::parse(std::ifstream(root_ / "report" / "eval.json"));
+  ASSERT_TRUE(json.contains("closed_surface"));
+  EXPECT_NEAR(json["closed_surface"]["surfaces"]["accuracy_m"]["median"].get<double>(), 0.1, 2e-3);
+  EXPECT_EQ(json["closed_surface"]["pixel"]["cameras"].size(), json["pixel"]["cameras"].size());
+  std::ifstream md(root_ / "report" / "report.md");
+  const std::string text((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("surface.ply against surface_closed.ply"), std::string::npos);
+
+  // Switched off, or without the file: no closed figures.
+  options.closed_surface = false;
+  EXPECT_FALSE(RunEvaluation(drive_, rec_, root_ / "report", options).has_closed);
+  options.closed_surface = true;
+  fs::remove(rec_ / "surface_closed.ply");
+  const EvalSummary without = RunEvaluation(drive_, rec_, root_ / "report", options);
+  EXPECT_FALSE(without.has_closed);
+  EXPECT_FALSE(nlohmann::json::parse(std::ifstream(root_ / "report" / "eval.json"))
+                   .contains("closed_surface"));
 }
 
 TEST_F(EvalTest, NoCommonTimestampsIsInputErrorNamingTheFile) {

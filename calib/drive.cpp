@@ -17,6 +17,7 @@
 #include <system_error>
 
 #include "calib/error.h"
+#include "calib/input_file.h"
 #include "calib/number_text.h"
 #include "calib/rig_io.h"
 
@@ -161,15 +162,7 @@ std::string JpegProblem(const std::string& data) {
 // The image `file` decoded with `flags`, at 8 bits per channel, checked against the camera's
 // size in rig.json; InputError naming the file otherwise.
 cv::Mat ReadImage8Bit(const std::filesystem::path& file, int flags, const Camera& rig_camera) {
-  std::string data;
-  {
-    std::ifstream stream(file, std::ios::binary);
-    if (!stream) throw InputError(file, "", "cannot open the image");
-    std::ostringstream buffer;
-    buffer << stream.rdbuf();
-    if (stream.bad()) throw InputError(file, "", "cannot read the image");
-    data = buffer.str();
-  }
+  const std::string data = ReadInputFile(file);
   if (const std::string problem = ImageFileProblem(data); !problem.empty()) {
     throw InputError(file, "", problem);
   }
@@ -178,7 +171,7 @@ cv::Mat ReadImage8Bit(const std::filesystem::path& file, int flags, const Camera
   }
   cv::Mat image;
   try {
-    const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8U, data.data());
+    const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8U, const_cast<char*>(data.data()));
     image = cv::imdecode(bytes, flags);
   } catch (const cv::Exception&) {
     image.release();  // a codec that throws on a corrupt file is treated as one that fails
@@ -346,12 +339,7 @@ Drive Drive::Open(const std::filesystem::path& folder, const DriveOptions& optio
 
 std::vector<double> ReadFrameTimestamps(const std::filesystem::path& frames_csv,
                                         const std::vector<std::string>& frame_names) {
-  std::ifstream file(frames_csv, std::ios::binary);
-  if (!file) throw InputError(frames_csv, "", "cannot be read");
-  std::ostringstream text;
-  text << file.rdbuf();
-  if (file.bad()) throw InputError(frames_csv, "", "cannot be read");
-  return ParseFrameTimestamps(text.str(), frames_csv, frame_names);
+  return ParseFrameTimestamps(ReadInputFile(frames_csv), frames_csv, frame_names);
 }
 
 std::vector<double> ParseFrameTimestamps(const std::string& text,

@@ -18,6 +18,7 @@
 
 #include "calib/error.h"
 #include "calib/import.h"
+#include "calib/input_file.h"
 #include "calib/rig_io.h"
 
 namespace omni {
@@ -120,12 +121,7 @@ Rig ImportKalibr(const std::filesystem::path& camchain_yaml, const KalibrImportO
   if (!std::filesystem::is_regular_file(camchain_yaml)) {
     throw InputError(camchain_yaml, "", "no such file");
   }
-  std::ifstream stream(camchain_yaml, std::ios::binary);
-  if (!stream) throw InputError(camchain_yaml, "", "cannot open");
-  std::ostringstream text;
-  text << stream.rdbuf();
-  if (stream.bad()) throw InputError(camchain_yaml, "", "cannot read");
-  return ParseKalibr(text.str(), camchain_yaml, options);
+  return ParseKalibr(ReadInputFile(camchain_yaml), camchain_yaml, options);
 }
 
 Rig ParseKalibr(const std::string& text, const std::filesystem::path& camchain_yaml,

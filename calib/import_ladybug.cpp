@@ -11,6 +11,7 @@
 
 #include "calib/error.h"
 #include "calib/import.h"
+#include "calib/input_file.h"
 #include "calib/number_text.h"
 #include "calib/rig_io.h"
 
@@ -41,14 +42,7 @@ Rigid3d HeadFromCam(const Eigen::Matrix<double, 6, 1>& values) {
 }  // namespace
 
 Rig ImportLadybug(const std::filesystem::path& conf, const LadybugImportOptions& options) {
-  std::ifstream file(conf, std::ios::binary);
-  if (!std::filesystem::is_regular_file(conf) || !file) {
-    throw InputError(conf, "", "no such file or not readable");
-  }
-  std::ostringstream text;
-  text << file.rdbuf();
-  if (file.bad()) throw InputError(conf, "", "read error");
-  return ParseLadybug(text.str(), conf, options);
+  return ParseLadybug(ReadInputFile(conf), conf, options);
 }
 
 Rig ParseLadybug(const std::string& text, const std::filesystem::path& conf,

@@ -14,6 +14,7 @@
 
 #include "calib/atomic_file.h"
 #include "calib/error.h"
+#include "calib/input_file.h"
 #include "calib/number_text.h"
 
 namespace omni {
@@ -383,16 +384,6 @@ std::optional<size_t> FindColor(const PlyElement& element, const std::string& ch
   return element.Find("diffuse_" + channel);
 }
 
-std::string ReadFileBytes(const std::filesystem::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  if (!stream) throw InputError(path, "", "cannot open");
-  if (std::filesystem::is_directory(path)) throw InputError(path, "", "is a folder, not a file");
-  std::ostringstream buffer;
-  buffer << stream.rdbuf();
-  if (stream.bad()) throw InputError(path, "", "cannot read");
-  return buffer.str();
-}
-
 PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, bool read_faces) {
   const PlyHeader header = ParseHeader(data, path);
 
@@ -524,11 +515,11 @@ void PutVertex(const Eigen::Vector3d& vertex, std::string* out) {
 }  // namespace
 
 TriangleMesh ReadPlyMesh(const std::filesystem::path& path) {
-  return ParsePlyMesh(ReadFileBytes(path), path);
+  return ParsePlyMesh(ReadInputFile(path), path);
 }
 
 PointCloud ReadPlyPoints(const std::filesystem::path& path) {
-  return ParsePlyPoints(ReadFileBytes(path), path);
+  return ParsePlyPoints(ReadInputFile(path), path);
 }
 
 TriangleMesh ParsePlyMesh(const std::string& data, const std::filesystem::path& source) {

@@ -11,6 +11,7 @@
 
 #include "calib/atomic_file.h"
 #include "calib/error.h"
+#include "calib/input_file.h"
 
 namespace omni {
 namespace {
@@ -328,13 +329,7 @@ Rig ParseRigJson(const std::string& text, const std::filesystem::path& source) {
 }
 
 Rig ReadRigJson(const std::filesystem::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  if (!stream) throw InputError(path, "", "cannot open");
-  if (std::filesystem::is_directory(path)) throw InputError(path, "", "is a folder, not a file");
-  std::ostringstream text;
-  text << stream.rdbuf();
-  if (stream.bad()) throw InputError(path, "", "cannot read");
-  return ParseRigJson(text.str(), path);
+  return ParseRigJson(ReadInputFile(path), path);
 }
 
 std::string RigToJson(const Rig& rig) {

@@ -8,6 +8,7 @@
 
 #include "calib/atomic_file.h"
 #include "calib/error.h"
+#include "calib/input_file.h"
 #include "calib/number_text.h"
 
 namespace omni {
@@ -71,13 +72,7 @@ std::vector<StampedPose> ParseTum(const std::string& text, const std::filesystem
 }
 
 std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  if (!stream) throw InputError(path, "", "cannot open");
-  if (std::filesystem::is_directory(path)) throw InputError(path, "", "is a folder, not a file");
-  std::ostringstream text;
-  text << stream.rdbuf();
-  if (stream.bad()) throw InputError(path, "", "cannot read");
-  return ParseTum(text.str(), path);
+  return ParseTum(ReadInputFile(path), path);
 }
 
 void WriteTum(const std::vector<StampedPose>& poses, const std::filesystem::path& path) {

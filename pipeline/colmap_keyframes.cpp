@@ -13,6 +13,7 @@
 #include <unordered_set>
 
 #include "calib/error.h"
+#include "calib/input_file.h"
 #include "calib/number_text.h"
 
 namespace omni {
@@ -85,15 +86,6 @@ class LineReader {
   const DataLine& line_;
 };
 
-std::string ReadText(const std::filesystem::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  if (!stream) throw InputError(path, "", "cannot open (a COLMAP text model is expected)");
-  std::ostringstream text;
-  text << stream.rdbuf();
-  if (stream.bad()) throw InputError(path, "", "cannot read");
-  return text.str();
-}
-
 struct Image {
   Eigen::Vector3d centre;
   std::string frame;  // the file name without its folder
@@ -103,10 +95,13 @@ struct Image {
 
 std::vector<SurfaceKeyframe> LoadColmapKeyframes(const std::filesystem::path& model,
                                                  std::unordered_map<PointId, Rgb8>* point_colors) {
+  if (!std::filesystem::exists(model / "cameras.txt")) {
+    throw InputError(model / "cameras.txt", "", "cannot open (a COLMAP text model is expected)");
+  }
   ColmapTextModel text;
-  text.cameras = ReadText(model / "cameras.txt");
-  text.images = ReadText(model / "images.txt");
-  text.points3d = ReadText(model / "points3D.txt");
+  text.cameras = ReadInputFile(model / "cameras.txt");
+  text.images = ReadInputFile(model / "images.txt");
+  text.points3d = ReadInputFile(model / "points3D.txt");
   return ParseColmapKeyframes(text, model, point_colors);
 }
 

@@ -20,7 +20,7 @@ if [ "${OMNI_SANITIZE_TESTS:-1}" != 0 ]; then
   # -O1 with assertions on (no NDEBUG), in their own folder; a finding aborts the program.
   step_start=$SECONDS
   sanitize_dir="${build_dir}-sanitize"
-  sanitize_targets=(calib_tests eval_tests raycast_tests synth_tests sfm_tests)
+  sanitize_targets=(calib_tests eval_tests raycast_tests synth_tests)
   launcher=()
   if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
   if [ ! -f "$sanitize_dir/CMakeCache.txt" ]; then

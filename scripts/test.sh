@@ -16,11 +16,11 @@ ctest --test-dir "$build_dir" --output-on-failure -j "$(nproc)" --timeout 600
 echo "test.sh: ctest $((SECONDS - step_start)) s"
 
 if [ "${OMNI_SANITIZE_TESTS:-1}" != 0 ]; then
-  # The unit-test programs of the libraries below the controllers, built with ASan and UBSan at
+  # The unit tests of calib (the readers of every input file), built with ASan and UBSan at
   # -O1 (Release otherwise: NDEBUG), in their own folder; a finding aborts the program.
   step_start=$SECONDS
   sanitize_dir="${build_dir}-sanitize"
-  sanitize_targets=(calib_tests eval_tests raycast_tests synth_tests)
+  sanitize_targets=(calib_tests)
   launcher=()
   if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
   if [ ! -f "$sanitize_dir/CMakeCache.txt" ]; then

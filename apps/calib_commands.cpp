@@ -8,6 +8,7 @@
 
 #include "apps/commands.h"
 #include "apps/default_rig.h"
+#include "apps/output_folder.h"
 #include "calib/error.h"
 #include "calib/import.h"
 #include "calib/rig_io.h"
@@ -39,9 +40,7 @@ void RunCalibImport(const CalibImportArgs& args) {
   if (args.upright && args.format != "ladybug") {
     throw InputError("", "--upright", "only applies to --format ladybug");
   }
-  if (std::filesystem::exists(args.output) && !args.force) {
-    throw InputError(args.output, "--out", "exists already (add --force to overwrite it)");
-  }
+  CheckOutputFile(args.output, args.force, "--out");
 
   Rig rig;
   if (args.format == "kalibr") {

@@ -1,10 +1,15 @@
 #include "apps/cli.h"
 
+#include <spdlog/sinks/sink.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <cstdio>
 #include <exception>
+#include <filesystem>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -12,6 +17,58 @@
 #include "calib/error.h"
 
 namespace omni {
+namespace {
+
+std::mutex& WarningsMutex() {
+  static std::mutex mutex;
+  return mutex;
+}
+
+std::vector<std::string>& Warnings() {
+  static std::vector<std::string> warnings;
+  return warnings;
+}
+
+// The command line's log: progress (info, debug) on stdout; warnings and errors on stderr,
+// each also kept for the run's JSON summary (WarningsLogged()).
+class SplitSink : public spdlog::sinks::sink {
+ public:
+  void log(const spdlog::details::log_msg& message) override {
+    if (message.level >= spdlog::level::warn) {
+      {
+        std::lock_guard<std::mutex> lock(WarningsMutex());
+        Warnings().emplace_back(message.payload.data(), message.payload.size());
+      }
+      std::fflush(stdout);  // keep the order of the two streams on a terminal
+      err_.log(message);
+    } else {
+      out_.log(message);
+    }
+  }
+  void flush() override {
+    out_.flush();
+    err_.flush();
+  }
+  void set_pattern(const std::string& pattern) override {
+    out_.set_pattern(pattern);
+    err_.set_pattern(pattern);
+  }
+  void set_formatter(std::unique_ptr<spdlog::formatter> formatter) override {
+    out_.set_formatter(formatter->clone());
+    err_.set_formatter(std::move(formatter));
+  }
+
+ private:
+  spdlog::sinks::stdout_color_sink_mt out_;
+  spdlog::sinks::stderr_color_sink_mt err_;
+};
+
+}  // namespace
+
+std::vector<std::string> WarningsLogged() {
+  std::lock_guard<std::mutex> lock(WarningsMutex());
+  return Warnings();
+}
 
 int& CommandExitCode() {
   static int exit_code = 0;
@@ -45,6 +102,8 @@ int RunCommandLine(int argc, char** argv) {
   RegisterViewCommand(app, global);
   RegisterExportCommand(app, global);
 
+  spdlog::set_default_logger(
+      std::make_shared<spdlog::logger>("omnisculpt", std::make_shared<SplitSink>()));
   app.parse_complete_callback([&global] {
     spdlog::set_pattern("%^[%L]%$ %v");
     spdlog::set_level(global.quiet     ? spdlog::level::warn
@@ -73,6 +132,14 @@ int RunCommandLine(int argc, char** argv) {
     return 2;
   } catch (const InputError& error) {
     std::fprintf(stderr, "omnisculpt: error: %s\n", error.what());
+    return 2;
+  } catch (const std::filesystem::filesystem_error& error) {
+    // The machine refused a file operation (permissions, a full disk, a read-only file system):
+    // not a bug of the program, so reported as bad input naming the path.
+    std::string message = error.path1().string();
+    if (!error.path2().empty()) message += " -> " + error.path2().string();
+    std::fprintf(stderr, "omnisculpt: error: %s: %s\n", message.c_str(),
+                 error.code().message().c_str());
     return 2;
   } catch (const std::exception& error) {
     std::fprintf(stderr, "omnisculpt: internal error: %s\n", error.what());

@@ -6,6 +6,7 @@
 
 #include <CLI/CLI.hpp>
 #include <string>
+#include <vector>
 
 namespace omni {
 
@@ -33,6 +34,10 @@ constexpr int kExitNotUsable = 3;
 
 // One line on stderr ("omnisculpt: error: <message>") and exit code kExitNotUsable.
 void ReportNotUsable(const std::string& message);
+
+// The warnings logged so far in this process (spdlog warn and error; they went to stderr), for
+// the run's JSON summary.
+std::vector<std::string> WarningsLogged();
 
 void RegisterCalibCommands(CLI::App& app, const GlobalOptions& global);
 void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global);

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "apps/commands.h"
+#include "apps/output_folder.h"
 #include "calib/error.h"
 #include "calib/mesh_check.h"
 #include "calib/ply.h"
@@ -63,6 +64,7 @@ struct RenderCommandOptions {
   std::string out_path;
   int width = 0;
   int height = 0;
+  bool force = false;
   RenderOptions render;
 };
 
@@ -94,6 +96,7 @@ void RegisterRender(CLI::App& app) {
   auto* bird = command->add_flag("--bird", options->bird, "orthographic view from above");
   pose->needs(rig)->needs(camera)->excludes(bird);
   command->add_option("--out", options->out_path, "PNG to write")->required();
+  command->add_flag("--force", options->force, "Replace --out if it exists");
   command->add_option("--width", options->width, "image width (camera: scaled intrinsics)")
       ->check(CLI::PositiveNumber);
   command->add_option("--height", options->height, "image height")->check(CLI::PositiveNumber);
@@ -101,6 +104,7 @@ void RegisterRender(CLI::App& app) {
     if (options->pose.empty() == !options->bird) {
       throw InputError("", "render", "give either --pose (with --rig and --camera) or --bird");
     }
+    CheckOutputFile(options->out_path, options->force, "--out");
     const TriangleMesh mesh = ReadPlyMesh(options->mesh_path);
     std::unique_ptr<RayCaster> caster;
     try {
@@ -139,6 +143,7 @@ struct EvalCommandOptions {
   std::string rec;
   std::string out;
   bool by_frame_index = false;
+  bool force = false;
   EvalOptions eval;
 };
 
@@ -155,7 +160,10 @@ void RegisterEval(CLI::App& app) {
       ->add_option("--rec", options->rec,
                    "reconstruction folder (poses.tum, surface.ply, points.ply)")
       ->required();
-  command->add_option("--out", options->out, "report folder (default REC/report)");
+  command->add_option("--out", options->out,
+                      "report folder (default REC/report), new or empty; --force replaces an "
+                      "earlier report (a folder with eval.json)");
+  command->add_flag("--force", options->force, "Replace an earlier report in --out");
   command
       ->add_option("--pixels", options->eval.ray_errors.pixels,
                    "pixels sampled for the ray-traced error (paper: 769k)")
@@ -185,7 +193,9 @@ void RegisterEval(CLI::App& app) {
     const std::filesystem::path out = options->out.empty()
                                           ? std::filesystem::path(options->rec) / "report"
                                           : std::filesystem::path(options->out);
+    OutputFolder folder(out, "eval.json", options->force, "eval");
     const EvalSummary summary = RunEvaluation(options->drive, options->rec, out, eval);
+    folder.Keep();
     const RayErrorResult& r = summary.ray_errors;
     std::printf("pose registration RMS %.1f cm over %zu keyframes\n",
                 100.0 * summary.poses.registration_rms, summary.poses.matches.size());

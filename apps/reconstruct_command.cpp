@@ -24,6 +24,7 @@
 #include <unordered_map>
 
 #include "apps/commands.h"
+#include "apps/output_folder.h"
 #include "apps/sfm_options.h"
 #include "calib/atomic_file.h"
 #include "calib/drive.h"
@@ -77,6 +78,8 @@ fs::path PrepareOutput(const fs::path& out, bool force) {
                        std::string("is not a previous reconstruction (no ") + kSummaryFile +
                            "): not replaced, even with --force");
   }
+  // OUT is replaced by a rename at the end: a read-only OUT is refused now, not after the run.
+  if (fs::exists(out)) CheckFolderWritable(out, "--out");
   fs::path partial = out;
   partial += ".incomplete";
   if (fs::exists(partial)) {
@@ -86,7 +89,12 @@ fs::path PrepareOutput(const fs::path& out, bool force) {
     spdlog::warn("reconstruct: removing {} left by an interrupted run", partial.string());
     fs::remove_all(partial);
   }
-  fs::create_directories(partial / "stats");
+  std::error_code error;
+  fs::create_directories(partial / "stats", error);
+  if (error) {
+    throw InputError(out.string(), "--out",
+                     "cannot create " + partial.string() + " (" + error.message() + ")");
+  }
   std::ostringstream marker;
   marker << "omnisculpt reconstruct (pid " << getpid() << ") is writing this folder; it is "
          << "renamed to " << out.filename().string() << " when complete.\n";
@@ -206,6 +214,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       {"frames", sfm.frames_total},
       {"frames_skipped", sfm.skipped.size()},
       {"skipped", sfm.skipped},
+      {"warnings", WarningsLogged()},
       {"frames_tracked", sfm.frames_tracked},
       {"frames_not_tracked", stats.frames_not_tracked},
       {"keyframes", sfm.keyframes.size()},

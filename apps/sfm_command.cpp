@@ -13,6 +13,7 @@
 #include <string>
 
 #include "apps/commands.h"
+#include "apps/output_folder.h"
 #include "apps/sfm_options.h"
 #include "calib/drive.h"
 #include "calib/error.h"
@@ -25,6 +26,7 @@ namespace {
 struct SfmCommandOptions {
   std::string drive;
   std::string out;
+  bool force = false;
   SfmCommandLine sfm;
 };
 
@@ -33,6 +35,7 @@ void RunSfmCommand(SfmCommandOptions& o, const GlobalOptions& global) {
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
   ApplySfmOptions(rig, "sfm", &o.sfm);
+  OutputFolder folder(o.out, "stats/sfm_summary.csv", o.force, "sfm");
   spdlog::info("sfm: {} frames, {} cameras, {} mode (largest camera offset {:.3f} m)",
                drive.NumFrames(), rig.NumCameras(),
                o.sfm.sfm.tracker.central ? "central" : "non-central", rig.MaxCenterOffset());
@@ -61,6 +64,7 @@ void RunSfmCommand(SfmCommandOptions& o, const GlobalOptions& global) {
   SfmOutputOptions output_options;
   output_options.frame_rate = o.sfm.frame_rate;
   const SfmOutputs outputs = WriteSfmOutputs(drive, run, out, output_options);
+  folder.Keep();
   const SfmStats& stats = outputs.stats;
   spdlog::info(
       "sfm: {} keyframes, {} points, {} of {} frames not tracked, {} skipped, {} loop "
@@ -90,7 +94,10 @@ void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global) {
       "closure)");
   command->add_option("drive", o->drive, "Drive folder (rig.json, images/<camera>/...)")
       ->required();
-  command->add_option("--out", o->out, "Output folder (poses.tum, points.ply, sparse/, stats/)");
+  command->add_option("--out", o->out,
+                      "Output folder (poses.tum, points.ply, sparse/, stats/), new or empty");
+  command->add_flag("--force", o->force,
+                    "Write into --out if it holds an earlier sfm output (stats/sfm_summary.csv)");
   AddSfmOptions(command, &o->sfm);
   command->callback([o, &global] { RunSfmCommand(*o, global); });
 }

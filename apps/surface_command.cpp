@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "apps/commands.h"
+#include "apps/output_folder.h"
 #include "calib/atomic_file.h"
 #include "calib/error.h"
 #include "calib/mesh_check.h"
@@ -32,6 +33,7 @@ struct SurfaceCommandOptions {
   std::string from_gt;
   std::string colmap;  // a COLMAP text model folder
   std::string out;
+  bool force = false;
   std::string enclosing = EnclosingName(SculptorOptions().enclosing);
   bool no_batch = false;
   bool no_genus_refinement = false;  // step 6 (paper §4.6) parts switched off
@@ -78,6 +80,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       gen_s);
 
   const std::filesystem::path out(o.out);
+  OutputFolder folder(out, "stats/keyframes.csv", o.force, "surface");
   IncrementalSculptor sculptor(o.sculptor);
   std::vector<KeyframeStats> stats;
   size_t processed = 0;  // keyframes sculpted so far (a batch counts its keyframes)
@@ -130,6 +133,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   }
   WritePlyPoints(points, out / "points.ply");
   if (!keyframe_poses.empty()) WriteTum(keyframe_poses, out / "poses.tum");
+  folder.Keep();
 
   std::vector<double> ms;
   size_t max_e = 0, added = 0, rejected = 0;
@@ -283,7 +287,9 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
   command->add_option(
       "--out", o->out,
       "Output folder (surface.ply, surface_closed.ply, points.ply, poses.tum with --from-gt, "
-      "stats/keyframes.csv)");
+      "stats/keyframes.csv), new or empty");
+  command->add_flag("--force", o->force,
+                    "Write into --out if it holds an earlier surface output (stats/keyframes.csv)");
   AddEnclosingOptions(command, &o->enclosing, &o->sculptor);
   AddObservedMeshOptions(command, &o->sculptor.observed);
   AddCarvingOptions(command, &o->sculptor);

@@ -128,7 +128,8 @@ void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global) {
                    "Per-camera exposure offset drawn in [-O, O] grey levels from the seed")
       ->capture_default_str();
   synth->add_option("--out", command->out, "Output drive folder");
-  synth->add_flag("--force", command->force, "Replace a non-empty --out (at the end only)");
+  synth->add_flag("--force", command->force,
+                  "Replace an earlier drive in --out (one with gt/scene.json), at the end only");
   synth->add_flag("--list-presets", command->list_presets,
                   "Describe the drive presets and the rig presets and exit");
   synth->add_flag("--list-rig-presets", command->list_rig_presets,

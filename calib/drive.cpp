@@ -3,16 +3,22 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <set>
 #include <sstream>
 #include <system_error>
 
 #include "calib/error.h"
+#include "calib/input_file.h"
+#include "calib/number_text.h"
 #include "calib/rig_io.h"
 
 namespace omni {
@@ -67,23 +73,111 @@ std::map<std::string, std::string> ListImages(const std::filesystem::path& camer
   return files;
 }
 
-// cv::imread of `file` with `flags`, at 8 bits per channel, checked against the camera's size
-// in rig.json; InputError naming the file otherwise.
+uint32_t BigEndian32(const unsigned char* bytes) {
+  return (uint32_t{bytes[0]} << 24) | (uint32_t{bytes[1]} << 16) | (uint32_t{bytes[2]} << 8) |
+         uint32_t{bytes[3]};
+}
+
+// The CRC-32 of PNG chunks (ISO 3309, polynomial 0xEDB88320).
+uint32_t Crc32(const unsigned char* bytes, size_t size) {
+  static const auto table = [] {
+    std::array<uint32_t, 256> entries{};
+    for (uint32_t n = 0; n < 256; ++n) {
+      uint32_t c = n;
+      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+      entries[n] = c;
+    }
+    return entries;
+  }();
+  uint32_t crc = 0xFFFFFFFFu;
+  for (size_t i = 0; i < size; ++i) crc = table[(crc ^ bytes[i]) & 0xFF] ^ (crc >> 8);
+  return crc ^ 0xFFFFFFFFu;
+}
+
+// The problem with the chunks of a PNG file (signature checked by the caller), or "".
+std::string PngProblem(const std::string& data) {
+  const auto* bytes = reinterpret_cast<const unsigned char*>(data.data());
+  size_t position = 8;
+  bool first = true;
+  while (true) {
+    if (data.size() - position < 12) return "truncated PNG (the file ends before its IEND chunk)";
+    const uint32_t length = BigEndian32(bytes + position);
+    const std::string type(data, position + 4, 4);
+    if (length > data.size() - position - 12) {
+      return "truncated PNG (chunk " + type + " runs past the end of the file)";
+    }
+    const uint32_t crc = BigEndian32(bytes + position + 8 + length);
+    if (Crc32(bytes + position + 4, length + 4) != crc) {
+      return "corrupt PNG (chunk " + type + " fails its CRC check)";
+    }
+    if (first) {
+      if (type != "IHDR" || length != 13) return "corrupt PNG (no IHDR chunk first)";
+      // 1, 2 and 4-bit grey or palette images decode to 8 bits exactly; 16 bits do not.
+      const int bit_depth = bytes[position + 8 + 8];
+      if (bit_depth > 8) {
+        return std::to_string(bit_depth) +
+               "-bit PNG: expected 8 bits per channel (convert it, e.g. `convert IN -depth 8 "
+               "OUT.png`; dividing by 256 here would hide a wrong export)";
+      }
+      first = false;
+    }
+    position += 12 + length;
+    if (type == "IEND") return "";
+  }
+}
+
+// The problem with the markers of a JPEG file (SOI checked by the caller), or "": every segment
+// fits the file and the entropy-coded data ends in a marker (EOI).
+std::string JpegProblem(const std::string& data) {
+  const auto* bytes = reinterpret_cast<const unsigned char*>(data.data());
+  const std::string truncated = "truncated JPEG (the file ends before its end-of-image marker)";
+  size_t position = 2;
+  while (true) {
+    if (position + 2 > data.size()) return truncated;
+    if (bytes[position] != 0xFF) return "corrupt JPEG (no marker where one is expected)";
+    while (position + 1 < data.size() && bytes[position + 1] == 0xFF) ++position;  // fill bytes
+    if (position + 2 > data.size()) return truncated;
+    const unsigned char marker = bytes[position + 1];
+    if (marker == 0xD9) return "";  // EOI
+    if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) {
+      position += 2;
+      continue;
+    }
+    if (position + 4 > data.size()) return truncated;
+    const size_t length = (size_t{bytes[position + 2]} << 8) | bytes[position + 3];
+    if (length < 2) return "corrupt JPEG (a segment shorter than its length field)";
+    if (length > data.size() - position - 2) return truncated;
+    position += 2 + length;
+    if (marker == 0xDA) {  // start of scan: entropy-coded data up to the next marker
+      while (position + 1 < data.size() &&
+             !(bytes[position] == 0xFF && bytes[position + 1] != 0x00 &&
+               !(bytes[position + 1] >= 0xD0 && bytes[position + 1] <= 0xD7))) {
+        ++position;
+      }
+      if (position + 1 >= data.size()) return truncated;
+    }
+  }
+}
+
+// The image `file` decoded with `flags`, at 8 bits per channel, checked against the camera's
+// size in rig.json; InputError naming the file otherwise.
 cv::Mat ReadImage8Bit(const std::filesystem::path& file, int flags, const Camera& rig_camera) {
+  const std::string data = ReadInputFile(file);
+  if (const std::string problem = ImageFileProblem(data); !problem.empty()) {
+    throw InputError(file, "", problem);
+  }
+  if (data.size() > static_cast<size_t>(std::numeric_limits<int>::max())) {
+    throw InputError(file, "", "image file too large (over 2 GB)");
+  }
   cv::Mat image;
   try {
-    image = cv::imread(file.string(), flags);
+    const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8U, const_cast<char*>(data.data()));
+    image = cv::imdecode(bytes, flags);
   } catch (const cv::Exception&) {
     image.release();  // a codec that throws on a corrupt file is treated as one that fails
   }
-  if (image.empty()) throw InputError(file, "", "cannot read image (missing or corrupt)");
-  if (image.depth() != CV_8U) {
-    // IMREAD_GRAYSCALE already gives 8 bits; this only guards against a codec that does not.
-    const double scale = image.depth() == CV_16U ? 1.0 / 256.0 : 1.0;
-    cv::Mat converted;
-    image.convertTo(converted, CV_8U, scale);
-    image = converted;
-  }
+  if (image.empty()) throw InputError(file, "", "cannot decode the image (corrupt)");
+  if (image.depth() != CV_8U) throw InputError(file, "", "expected 8 bits per channel");
   if (image.cols != rig_camera.width || image.rows != rig_camera.height) {
     throw InputError(file, "",
                      "image is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
@@ -95,6 +189,17 @@ cv::Mat ReadImage8Bit(const std::filesystem::path& file, int flags, const Camera
 }
 
 }  // namespace
+
+std::string ImageFileProblem(const std::string& data) {
+  if (data.empty()) return "empty file (0 bytes)";
+  static const char kPngSignature[] = "\x89PNG\r\n\x1a\n";
+  if (data.size() >= 8 && data.compare(0, 8, kPngSignature, 8) == 0) return PngProblem(data);
+  if (data.size() >= 3 && static_cast<unsigned char>(data[0]) == 0xFF &&
+      static_cast<unsigned char>(data[1]) == 0xD8 && static_cast<unsigned char>(data[2]) == 0xFF) {
+    return JpegProblem(data);
+  }
+  return "not a PNG or JPEG image (its first bytes are neither signature)";
+}
 
 std::string DriveOptions::Check() const {
   if (image_extensions.empty()) return "image_extensions: expected at least one extension";
@@ -234,8 +339,13 @@ Drive Drive::Open(const std::filesystem::path& folder, const DriveOptions& optio
 
 std::vector<double> ReadFrameTimestamps(const std::filesystem::path& frames_csv,
                                         const std::vector<std::string>& frame_names) {
-  std::ifstream in(frames_csv);
-  if (!in) throw InputError(frames_csv, "", "cannot be read");
+  return ParseFrameTimestamps(ReadInputFile(frames_csv), frames_csv, frame_names);
+}
+
+std::vector<double> ParseFrameTimestamps(const std::string& text,
+                                         const std::filesystem::path& frames_csv,
+                                         const std::vector<std::string>& frame_names) {
+  std::istringstream in(text);
   auto split = [](const std::string& line) {
     std::vector<std::string> fields;
     std::string field;
@@ -258,28 +368,27 @@ std::vector<double> ReadFrameTimestamps(const std::filesystem::path& frames_csv,
     return static_cast<size_t>(it - header.begin());
   };
   const size_t frame_column = column("frame"), time_column = column("timestamp_s");
-  column("camera");
-  std::map<std::string, std::pair<double, int>> sums;  // frame -> (sum, rows)
+  const size_t camera_column = column("camera");
+  const size_t last_column = std::max({frame_column, time_column, camera_column});
+  std::map<std::string, std::pair<double, int>> sums;       // frame -> (sum, rows)
+  std::set<std::pair<std::string, std::string>> rows_seen;  // (frame, camera)
   for (int number = 2; std::getline(in, line); ++number) {
     if (line.empty() || line == "\r") continue;
     const std::vector<std::string> fields = split(line);
     const std::string where = "line " + std::to_string(number);
-    if (fields.size() <= std::max(frame_column, time_column))
-      throw InputError(frames_csv, where, "expected " + std::to_string(header.size()) + " fields");
-    const std::string& text = fields[time_column];
-    // A plain decimal number (no hexadecimal, no inf or nan).
-    const bool decimal =
-        !text.empty() && text.find_first_not_of("0123456789.-+eE") == std::string::npos;
-    double value = 0.0;
-    size_t used = 0;
-    try {
-      value = decimal ? std::stod(text, &used) : 0.0;
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (!decimal || used != text.size() || !std::isfinite(value))
+    if (fields.size() <= last_column)
       throw InputError(frames_csv, where,
-                       "timestamp_s: expected a decimal number of seconds, got \"" + text + "\"");
+                       "expected " + std::to_string(header.size()) + " fields, got " +
+                           std::to_string(fields.size()));
+    if (!rows_seen.emplace(fields[frame_column], fields[camera_column]).second)
+      throw InputError(frames_csv, where,
+                       "a second row for frame \"" + fields[frame_column] + "\" camera \"" +
+                           fields[camera_column] + "\"");
+    const std::string& value_text = fields[time_column];
+    double value = 0.0;
+    if (!ParseDecimal(value_text, &value))
+      throw InputError(frames_csv, where,
+                       "timestamp_s: " + DecimalProblem(value_text) + " (seconds)");
     auto& [sum, rows] = sums[fields[frame_column]];
     sum += value;
     ++rows;
@@ -289,6 +398,9 @@ std::vector<double> ReadFrameTimestamps(const std::filesystem::path& frames_csv,
     const auto it = sums.find(frame);
     if (it == sums.end()) throw InputError(frames_csv, "", "no row for frame \"" + frame + "\"");
     timestamps.push_back(it->second.first / it->second.second);
+    if (!std::isfinite(timestamps.back()))
+      throw InputError(frames_csv, "",
+                       "frame \"" + frame + "\": timestamp_s out of range (its mean overflows)");
     if (timestamps.size() > 1 && !(timestamps.back() > timestamps[timestamps.size() - 2]))
       throw InputError(frames_csv, "",
                        "timestamps must increase: frame \"" + frame +

@@ -51,8 +51,9 @@ class Drive {
   const std::vector<IncompleteFrame>& incomplete_frames() const { return incomplete_frames_; }
 
   std::filesystem::path ImagePath(size_t frame, size_t camera) const;
-  // The image as 8-bit grey. Throws InputError naming the file if it is missing, corrupt, or not
-  // the size rig.json gives for that camera.
+  // The image as 8-bit grey. Throws InputError naming the file if it is missing, damaged or not
+  // an image (ImageFileProblem), not 8 bits per channel, or not the size rig.json gives for that
+  // camera.
   cv::Mat LoadGray(size_t frame, size_t camera) const;
   // The image in colour, 8-bit RGB (CV_8UC3, red first as PLY colours want; a grey image gives
   // three equal channels). Throws InputError as LoadGray.
@@ -80,6 +81,18 @@ class Drive {
 // timestamps that do not increase.
 std::vector<double> ReadFrameTimestamps(const std::filesystem::path& frames_csv,
                                         const std::vector<std::string>& frame_names);
+// The same on the text of a frames.csv in memory; `frames_csv` names it in the errors.
+std::vector<double> ParseFrameTimestamps(const std::string& text,
+                                         const std::filesystem::path& frames_csv,
+                                         const std::vector<std::string>& frame_names);
+
+// Why the bytes of an image file cannot be decoded as a drive image, or "" when they can: a PNG
+// whose chunks do not all fit the file or fail their CRC, or has more than 8 bits per channel
+// (refused: dividing by 256 would hide a wrong export); a JPEG whose segments do not fit the file
+// or whose data does not end in a marker; anything that is neither (a renamed file, 0 bytes).
+// Drive::LoadGray checks it before decoding, so that the decoders never see a damaged file and
+// print their own line on stderr ("libpng error: Read Error") naming no file.
+std::string ImageFileProblem(const std::string& bytes);
 
 // "2" < "10" < "a2" < "a10": digit runs compare by value.
 bool NaturalLess(const std::string& a, const std::string& b);

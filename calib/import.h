@@ -36,10 +36,20 @@ struct KalibrImportOptions {
   std::string Check() const;
 };
 Rig ImportKalibr(const std::filesystem::path& camchain_yaml, const KalibrImportOptions& options);
+// The same on the text of a camchain.yaml in memory; `camchain_yaml` names it in the errors.
+Rig ParseKalibr(const std::string& text, const std::filesystem::path& camchain_yaml,
+                const KalibrImportOptions& options = {});
 
 struct LadybugImportOptions {
   bool upright = false;
 };
 Rig ImportLadybug(const std::filesystem::path& conf, const LadybugImportOptions& options = {});
+// The same on the text of a .conf in memory; `conf` names it in the errors.
+Rig ParseLadybug(const std::string& text, const std::filesystem::path& conf,
+                 const LadybugImportOptions& options = {});
+
+// Both importers check the rig they make as rig.json is checked (calib/rig_io.h, ranges
+// included), so that what they write reads back; an image side is at most this many pixels.
+constexpr int kMaxImportedImageSide = 1 << 16;
 
 }  // namespace omni

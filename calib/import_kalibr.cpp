@@ -11,12 +11,15 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
 
 #include "calib/error.h"
 #include "calib/import.h"
+#include "calib/input_file.h"
+#include "calib/rig_io.h"
 
 namespace omni {
 namespace {
@@ -98,6 +101,9 @@ std::string NameFromRostopic(const std::string& rostopic) {
   return "";
 }
 
+Rig ParseKalibrYaml(const std::string& text, const std::filesystem::path& camchain_yaml,
+                    const KalibrImportOptions& options);
+
 }  // namespace
 
 std::string KalibrImportOptions::Check() const {
@@ -111,15 +117,31 @@ Rig ImportKalibr(const std::filesystem::path& camchain_yaml) {
 }
 
 Rig ImportKalibr(const std::filesystem::path& camchain_yaml, const KalibrImportOptions& options) {
-  if (const std::string problem = options.Check(); !problem.empty()) {
-    throw InputError("", "KalibrImportOptions", problem);
-  }
+  ThrowIfInvalid(options.Check(), "KalibrImportOptions");
   if (!std::filesystem::is_regular_file(camchain_yaml)) {
     throw InputError(camchain_yaml, "", "no such file");
   }
+  return ParseKalibr(ReadInputFile(camchain_yaml), camchain_yaml, options);
+}
+
+Rig ParseKalibr(const std::string& text, const std::filesystem::path& camchain_yaml,
+                const KalibrImportOptions& options) {
+  ThrowIfInvalid(options.Check(), "KalibrImportOptions");
+  try {
+    return ParseKalibrYaml(text, camchain_yaml, options);
+  } catch (const YAML::Exception& error) {
+    // A node of an unexpected kind (a map where a name is expected, ...).
+    throw InputError(camchain_yaml, "", std::string("malformed YAML: ") + error.what());
+  }
+}
+
+namespace {
+
+Rig ParseKalibrYaml(const std::string& text, const std::filesystem::path& camchain_yaml,
+                    const KalibrImportOptions& options) {
   YAML::Node root;
   try {
-    root = YAML::LoadFile(camchain_yaml.string());
+    root = YAML::Load(text);
   } catch (const YAML::Exception& error) {
     throw InputError(camchain_yaml, "", std::string("malformed YAML: ") + error.what());
   }
@@ -131,7 +153,8 @@ Rig ImportKalibr(const std::filesystem::path& camchain_yaml, const KalibrImportO
   std::map<int, YAML::Node> camera_nodes;
   for (const auto& entry : root) {
     const std::string key = entry.first.as<std::string>();
-    if (key.size() > 3 && key.compare(0, 3, "cam") == 0 &&
+    // At most 4 digits: cam0 to cam9999.
+    if (key.size() > 3 && key.size() <= 7 && key.compare(0, 3, "cam") == 0 &&
         std::all_of(key.begin() + 3, key.end(),
                     [](char c) { return std::isdigit(static_cast<unsigned char>(c)); })) {
       camera_nodes[std::stoi(key.substr(3))] = entry.second;
@@ -149,7 +172,10 @@ Rig ImportKalibr(const std::filesystem::path& camchain_yaml, const KalibrImportO
   rig.name = camchain_yaml.stem().string();
   std::vector<std::string> topic_names;
   std::vector<YAML::Node> chain_nodes, imu_nodes;
-  for (const auto& [index, node] : camera_nodes) {
+  for (const auto& entry : camera_nodes) {
+    // Not a structured binding: C++17 lambdas (below) cannot capture one.
+    const int index = entry.first;
+    const YAML::Node& node = entry.second;
     const std::string key = "cam" + std::to_string(index);
     if (!node.IsMap()) throw InputError(camchain_yaml, key, "expected a map" + LineSuffix(node));
     auto field = [&](const char* name) { return key + "." + name; };
@@ -177,8 +203,10 @@ Rig ImportKalibr(const std::filesystem::path& camchain_yaml, const KalibrImportO
     const std::vector<double> resolution =
         ReadNumbers(camchain_yaml, require("resolution"), field("resolution"), 2, "width height");
     for (double size : resolution) {
-      if (size < 1.0 || size != std::floor(size)) {
-        throw InputError(camchain_yaml, field("resolution"), "expected two positive integers");
+      if (!(size >= 1.0 && size <= kMaxImportedImageSide) || size != std::floor(size)) {
+        throw InputError(
+            camchain_yaml, field("resolution"),
+            "expected two positive integers up to " + std::to_string(kMaxImportedImageSide));
       }
     }
     camera.width = static_cast<int>(resolution[0]);
@@ -245,10 +273,10 @@ Rig ImportKalibr(const std::filesystem::path& camchain_yaml, const KalibrImportO
   }
 
   rig.central = rig.MaxCenterOffset() <= options.central_max_center_offset_m;
-  if (const std::string problem = rig.Check(); !problem.empty()) {
-    throw InputError(camchain_yaml, "", problem);
-  }
-  return rig;
+  // The checks of rig.json, ranges included: what is imported reads back.
+  return ParseRigJson(RigToJson(rig), camchain_yaml);
 }
+
+}  // namespace
 
 }  // namespace omni

@@ -11,6 +11,9 @@
 
 #include "calib/error.h"
 #include "calib/import.h"
+#include "calib/input_file.h"
+#include "calib/number_text.h"
+#include "calib/rig_io.h"
 
 namespace omni {
 namespace {
@@ -39,10 +42,12 @@ Rigid3d HeadFromCam(const Eigen::Matrix<double, 6, 1>& values) {
 }  // namespace
 
 Rig ImportLadybug(const std::filesystem::path& conf, const LadybugImportOptions& options) {
-  std::ifstream stream(conf);
-  if (!std::filesystem::is_regular_file(conf) || !stream) {
-    throw InputError(conf, "", "no such file or not readable");
-  }
+  return ParseLadybug(ReadInputFile(conf), conf, options);
+}
+
+Rig ParseLadybug(const std::string& text, const std::filesystem::path& conf,
+                 const LadybugImportOptions& options) {
+  std::istringstream stream(text);
 
   std::optional<Eigen::Vector2i> resolution;
   std::vector<CameraBlock> blocks;
@@ -65,9 +70,8 @@ Rig ImportLadybug(const std::filesystem::path& conf, const LadybugImportOptions&
       std::string token;
       bool numeric = true;
       while (tokens >> token) {
-        char* end = nullptr;
-        const double value = std::strtod(token.c_str(), &end);
-        if (end == token.c_str() || *end != '\0' || !std::isfinite(value)) numeric = false;
+        double value = 0.0;
+        if (!ParseDecimal(token, &value)) numeric = false;
         values.push_back(value);
       }
       if (!numeric || static_cast<int>(values.size()) != count) {
@@ -87,9 +91,12 @@ Rig ImportLadybug(const std::filesystem::path& conf, const LadybugImportOptions&
 
     if (key == "resolution") {
       const std::vector<double> values = numbers(2, "width height");
-      if (values[0] < 1 || values[1] < 1 || values[0] != std::floor(values[0]) ||
-          values[1] != std::floor(values[1])) {
-        throw InputError(conf, field, "Resolution: expected two positive integers");
+      for (const double size : values) {
+        if (!(size >= 1 && size <= kMaxImportedImageSide) || size != std::floor(size)) {
+          throw InputError(conf, field,
+                           "Resolution: expected two positive integers up to " +
+                               std::to_string(kMaxImportedImageSide));
+        }
       }
       resolution = Eigen::Vector2i(static_cast<int>(values[0]), static_cast<int>(values[1]));
     } else if (key == "begincamera") {
@@ -121,7 +128,6 @@ Rig ImportLadybug(const std::filesystem::path& conf, const LadybugImportOptions&
     // Other lines (serial numbers, distortion maps of the raw images, ...) are not needed for
     // rectified pinhole images.
   }
-  if (stream.bad()) throw InputError(conf, "", "read error");
   if (in_block) {
     throw InputError(conf, "line " + std::to_string(blocks.back().begin_line),
                      "BeginCamera without EndCamera");
@@ -172,10 +178,8 @@ Rig ImportLadybug(const std::filesystem::path& conf, const LadybugImportOptions&
     }
     rig.cameras.push_back(camera);
   }
-  if (const std::string problem = rig.Check(); !problem.empty()) {
-    throw InputError(conf, "", problem);
-  }
-  return rig;
+  // The checks of rig.json, ranges included: what is imported reads back.
+  return ParseRigJson(RigToJson(rig), conf);
 }
 
 }  // namespace omni

@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
@@ -13,6 +14,8 @@
 
 #include "calib/atomic_file.h"
 #include "calib/error.h"
+#include "calib/input_file.h"
+#include "calib/number_text.h"
 
 namespace omni {
 namespace {
@@ -51,6 +54,48 @@ size_t PlyTypeSize(PlyType type) {
 }
 
 bool IsIntegerType(PlyType type) { return type != PlyType::kFloat32 && type != PlyType::kFloat64; }
+
+// The values an integer type holds (ascii values are checked against it).
+std::pair<double, double> IntegerRange(PlyType type) {
+  switch (type) {
+    case PlyType::kInt8:
+      return {-128.0, 127.0};
+    case PlyType::kUint8:
+      return {0.0, 255.0};
+    case PlyType::kInt16:
+      return {-32768.0, 32767.0};
+    case PlyType::kUint16:
+      return {0.0, 65535.0};
+    case PlyType::kInt32:
+      return {-2147483648.0, 2147483647.0};
+    case PlyType::kUint32:
+      return {0.0, 4294967295.0};
+    default:
+      return {0.0, 0.0};
+  }
+}
+
+const char* PlyTypeName(PlyType type) {
+  switch (type) {
+    case PlyType::kInt8:
+      return "char";
+    case PlyType::kUint8:
+      return "uchar";
+    case PlyType::kInt16:
+      return "short";
+    case PlyType::kUint16:
+      return "ushort";
+    case PlyType::kInt32:
+      return "int";
+    case PlyType::kUint32:
+      return "uint";
+    case PlyType::kFloat32:
+      return "float";
+    case PlyType::kFloat64:
+      return "double";
+  }
+  return "?";
+}
 
 bool HostIsLittleEndian() {
   const uint16_t probe = 1;
@@ -219,6 +264,27 @@ class DataReader {
     throw InputError(path_, "element " + element_, problem);
   }
 
+  // Whether `items` values of `type` can still follow (each takes at least one byte, or two
+  // characters in ascii); a list length that cannot is truncated data.
+  void CheckRoomFor(double items, PlyType type) const {
+    const double per_item = format_ == PlyFormat::kAscii ? 2.0 : PlyTypeSize(type);
+    if (items * per_item > static_cast<double>(data_.size() - position_) + 1.0) Truncated();
+  }
+
+  // After the last element: the file must end here (ascii: only white space may follow).
+  void ExpectEnd() const {
+    size_t end = position_;
+    if (format_ == PlyFormat::kAscii) {
+      while (end < data_.size() && std::isspace(static_cast<unsigned char>(data_[end]))) ++end;
+    }
+    if (end != data_.size()) {
+      throw InputError(path_, "data",
+                       std::to_string(data_.size() - position_) +
+                           " byte(s) after the last element of the header (its counts are lower "
+                           "than the data)");
+    }
+  }
+
  private:
   [[noreturn]] void Truncated() const { Fail("truncated data (the file ends too early)"); }
 
@@ -280,12 +346,15 @@ class DataReader {
     while (end < data_.size() && !std::isspace(static_cast<unsigned char>(data_[end]))) ++end;
     const std::string token = data_.substr(position_, end - position_);
     position_ = end;
-    char* parse_end = nullptr;
-    const double value = std::strtod(token.c_str(), &parse_end);
-    if (parse_end != token.c_str() + token.size() ||
-        (IsIntegerType(type) && value != std::floor(value))) {
-      Fail("expected a number of type " + std::string(IsIntegerType(type) ? "integer" : "real") +
-           ", got \"" + token + "\"");
+    double value = 0.0;
+    if (IsIntegerType(type)) {
+      const auto [low, high] = IntegerRange(type);
+      if (!IsDecimalInteger(token) || !ParseDecimal(token, &value) || value < low || value > high) {
+        Fail(std::string("expected an integer of type ") + PlyTypeName(type) + ", got \"" +
+             token.substr(0, 40) + "\"");
+      }
+    } else if (!ParseDecimal(token, &value)) {
+      Fail(DecimalProblem(token));
     }
     return value;
   }
@@ -315,14 +384,7 @@ std::optional<size_t> FindColor(const PlyElement& element, const std::string& ch
   return element.Find("diffuse_" + channel);
 }
 
-PlyContent ReadPly(const std::filesystem::path& path, bool read_faces) {
-  std::ifstream stream(path, std::ios::binary);
-  if (!stream) throw InputError(path, "", "cannot open");
-  if (std::filesystem::is_directory(path)) throw InputError(path, "", "is a folder, not a file");
-  std::ostringstream buffer;
-  buffer << stream.rdbuf();
-  if (stream.bad()) throw InputError(path, "", "cannot read");
-  const std::string data = buffer.str();
+PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, bool read_faces) {
   const PlyHeader header = ParseHeader(data, path);
 
   const PlyElement* vertex_element = nullptr;
@@ -387,12 +449,14 @@ PlyContent ReadPly(const std::filesystem::path& path, bool read_faces) {
         }
         const double count = reader.Read(property.count_type);
         if (count < 0) reader.Fail("negative list length");
+        reader.CheckRoomFor(count, property.type);
         const bool is_indices = indices_property && *indices_property == p;
         if (is_indices) polygon.clear();
         for (size_t k = 0; k < static_cast<size_t>(count); ++k) {
           const double value = reader.Read(property.type);
           if (is_indices) {
-            if (value < 0 || value >= static_cast<double>(vertex_element->count)) {
+            if (value < 0 || value >= static_cast<double>(vertex_element->count) ||
+                value > std::numeric_limits<int>::max()) {
               std::ostringstream problem;
               problem << "face " << item << ": vertex index " << value << " out of range [0, "
                       << vertex_element->count << ")";
@@ -413,7 +477,14 @@ PlyContent ReadPly(const std::filesystem::path& path, bool read_faces) {
         }
       }
       if (is_vertex) {
-        content.vertices.emplace_back(row[xyz[0]], row[xyz[1]], row[xyz[2]]);
+        const Eigen::Vector3d vertex(row[xyz[0]], row[xyz[1]], row[xyz[2]]);
+        if (!vertex.allFinite()) {
+          std::ostringstream problem;
+          problem << "vertex " << item << ": expected finite coordinates, got " << vertex.x() << " "
+                  << vertex.y() << " " << vertex.z();
+          reader.Fail(problem.str());
+        }
+        content.vertices.push_back(vertex);
         if (has_colors) {
           Eigen::Matrix<uint8_t, 3, 1> color;
           for (int c = 0; c < 3; ++c) {
@@ -424,6 +495,7 @@ PlyContent ReadPly(const std::filesystem::path& path, bool read_faces) {
       }
     }
   }
+  reader.ExpectEnd();
   return content;
 }
 
@@ -443,7 +515,15 @@ void PutVertex(const Eigen::Vector3d& vertex, std::string* out) {
 }  // namespace
 
 TriangleMesh ReadPlyMesh(const std::filesystem::path& path) {
-  PlyContent content = ReadPly(path, /*read_faces=*/true);
+  return ParsePlyMesh(ReadInputFile(path), path);
+}
+
+PointCloud ReadPlyPoints(const std::filesystem::path& path) {
+  return ParsePlyPoints(ReadInputFile(path), path);
+}
+
+TriangleMesh ParsePlyMesh(const std::string& data, const std::filesystem::path& source) {
+  PlyContent content = ParsePly(data, source, /*read_faces=*/true);
   TriangleMesh mesh;
   mesh.vertices = std::move(content.vertices);
   mesh.triangles = std::move(content.triangles);
@@ -451,8 +531,8 @@ TriangleMesh ReadPlyMesh(const std::filesystem::path& path) {
   return mesh;
 }
 
-PointCloud ReadPlyPoints(const std::filesystem::path& path) {
-  PlyContent content = ReadPly(path, /*read_faces=*/false);
+PointCloud ParsePlyPoints(const std::string& data, const std::filesystem::path& source) {
+  PlyContent content = ParsePly(data, source, /*read_faces=*/false);
   PointCloud cloud;
   cloud.points = std::move(content.vertices);
   cloud.colors = std::move(content.colors);

@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 namespace omni {
@@ -22,10 +23,16 @@ struct PointCloud {
   std::vector<Rgb8> colors;  // empty, or one per point
 };
 
-// Throws InputError naming the file on malformed input. Faces with more than three vertices
-// are split into fans.
+// Throws InputError naming the file on malformed input: a header that does not describe the
+// data exactly (the file must end after the last element's rows: no missing and no trailing
+// bytes; ascii may end in white space), a vertex coordinate that is not finite, an ascii value
+// that is not a decimal number of its type (no hexadecimal, inf or nan; integers in the type's
+// range), a face index out of range. Faces with more than three vertices are split into fans.
 TriangleMesh ReadPlyMesh(const std::filesystem::path& path);
 PointCloud ReadPlyPoints(const std::filesystem::path& path);
+// The same on the bytes of a file in memory; `source` names it in the errors.
+TriangleMesh ParsePlyMesh(const std::string& data, const std::filesystem::path& source);
+PointCloud ParsePlyPoints(const std::string& data, const std::filesystem::path& source);
 // Written atomically, with red/green/blue uchar vertex properties when the mesh or the cloud
 // has colours (std::invalid_argument when their number is not that of the vertices).
 void WritePlyMesh(const TriangleMesh& mesh, const std::filesystem::path& path);

@@ -1,5 +1,6 @@
 #include "calib/rig_io.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <fstream>
@@ -10,6 +11,7 @@
 
 #include "calib/atomic_file.h"
 #include "calib/error.h"
+#include "calib/input_file.h"
 
 namespace omni {
 namespace {
@@ -22,6 +24,20 @@ constexpr double kQuaternionNormTolerance = 1e-3;
 // Within this of 1 the quaternion is kept exactly as written, so that writing a rig and reading
 // it back gives the same bits (renormalising an already unit quaternion can move the last bit).
 constexpr double kQuaternionExactTolerance = 1e-12;
+
+// The ranges a real camera and rig can have; values outside are typos or corrupt files.
+// Image sides up to this many pixels.
+constexpr int kMaxImageSide = 1 << 16;
+// Focal lengths in pixels within these multiples of the image's longer side: a 360-degree
+// fisheye has about 0.16, a 1000 mm lens on a full-frame sensor about 28.
+constexpr double kMinFocalPerSide = 0.01;
+constexpr double kMaxFocalPerSide = 100.0;
+// The principal point within the image widened by this many image sizes on each side.
+constexpr double kPrincipalPointMargin = 1.0;
+// Distortion coefficients up to this magnitude.
+constexpr double kMaxDistortion = 1000.0;
+// A camera at most this far (metres) from the rig's origin.
+constexpr double kMaxCameraOffset = 100.0;
 
 const CameraModel kAllModels[] = {CameraModel::kPinhole, CameraModel::kOpenCV,
                                   CameraModel::kFisheye};
@@ -133,6 +149,66 @@ class Parser {
     return Rigid3d(rotation, Eigen::Vector3d(t[0], t[1], t[2]));
   }
 
+  // The ranges above, each failure naming the field and the range.
+  void CheckPlausible(const Camera& camera, const std::string& field) const {
+    auto range = [](double low, double high) {
+      std::ostringstream text;
+      text << "[" << low << ", " << high << "]";
+      return text.str();
+    };
+    auto describe = [](double value) {
+      std::ostringstream text;
+      text << value;
+      return text.str();
+    };
+    if (camera.width > kMaxImageSide) {
+      Fail(field + ".width", "expected at most " + std::to_string(kMaxImageSide) + " pixels, got " +
+                                 std::to_string(camera.width));
+    }
+    if (camera.height > kMaxImageSide) {
+      Fail(field + ".height", "expected at most " + std::to_string(kMaxImageSide) +
+                                  " pixels, got " + std::to_string(camera.height));
+    }
+    const double side = std::max(camera.width, camera.height);
+    const char* names[4] = {"fx", "fy", "cx", "cy"};
+    for (int i = 0; i < 2; ++i) {
+      const double focal = camera.params[i];
+      if (!(focal >= kMinFocalPerSide * side && focal <= kMaxFocalPerSide * side)) {
+        Fail(field + ".params[" + std::to_string(i) + "]",
+             std::string("expected a focal length ") + names[i] + " in " +
+                 range(kMinFocalPerSide * side, kMaxFocalPerSide * side) +
+                 " pixels for a camera of " + std::to_string(camera.width) + "x" +
+                 std::to_string(camera.height) + ", got " + describe(focal));
+      }
+    }
+    for (int i = 2; i < 4; ++i) {
+      const double size = i == 2 ? camera.width : camera.height;
+      const double low = -kPrincipalPointMargin * size;
+      const double high = (1.0 + kPrincipalPointMargin) * size;
+      const double value = camera.params[i];
+      if (!(value >= low && value <= high)) {
+        Fail(field + ".params[" + std::to_string(i) + "]",
+             std::string("expected a principal point ") + names[i] + " in " + range(low, high) +
+                 " pixels for a camera of " + std::to_string(camera.width) + "x" +
+                 std::to_string(camera.height) + ", got " + describe(value));
+      }
+    }
+    for (size_t i = 4; i < camera.params.size(); ++i) {
+      if (!(std::abs(camera.params[i]) <= kMaxDistortion)) {
+        Fail(field + ".params[" + std::to_string(i) + "]",
+             "expected a distortion coefficient in " + range(-kMaxDistortion, kMaxDistortion) +
+                 ", got " + describe(camera.params[i]));
+      }
+    }
+    const Eigen::Vector3d& t = camera.cam_from_rig.translation;
+    // The largest component first: the norm of [1e308, 0, 0] overflows.
+    if (!(t.cwiseAbs().maxCoeff() <= kMaxCameraOffset && t.norm() <= kMaxCameraOffset)) {
+      Fail(field + ".cam_from_rig.t", "expected a camera within " + describe(kMaxCameraOffset) +
+                                          " m of the rig's origin, got [" + describe(t.x()) + ", " +
+                                          describe(t.y()) + ", " + describe(t.z()) + "]");
+    }
+  }
+
   Camera ParseCamera(const Json& value, const std::string& field) const {
     if (!value.is_object()) Fail(field, "expected a camera object, got " + Describe(value));
     Camera camera;
@@ -170,6 +246,8 @@ class Parser {
                          "an object {\"q_wxyz\": [w, x, y, z], \"t\": [x, y, z]}"),
                   field + ".cam_from_rig");
 
+    CheckPlausible(camera, field);
+
     // Semantic checks of the camera model. Camera::Check names the field relative to the
     // camera ("params: ..."); prefix it with this camera's path.
     const std::string problem = camera.Check();
@@ -190,8 +268,10 @@ class Parser {
     }
     Rig rig;
     rig.name = String(Member(root, "name", "name", "a string"), "name");
-    // "central" is optional and defaults to true (the paper's central approximation).
-    if (auto it = root.find("central"); it != root.end()) rig.central = Bool(*it, "central");
+    // Whether the SfM may treat the rig as one central camera: a choice the file states.
+    rig.central = Bool(Member(root, "central", "central",
+                              "true (one central camera, the paper's approximation) or false"),
+                       "central");
 
     const Json& cameras = Member(root, "cameras", "cameras", "an array of cameras");
     if (!cameras.is_array()) {
@@ -238,18 +318,18 @@ Rig ParseRigJson(const std::string& text, const std::filesystem::path& source) {
     if (bracket != std::string::npos) message = message.substr(bracket + 2);
     throw InputError(source, "",
                      "invalid JSON at byte " + std::to_string(error.byte) + ": " + message);
+  } catch (const Json::exception& error) {
+    // A number too large for a double (out_of_range.406 "number overflow parsing '1e309'").
+    std::string message = error.what();
+    const size_t bracket = message.find("] ");
+    if (bracket != std::string::npos) message = message.substr(bracket + 2);
+    throw InputError(source, "", "invalid JSON: " + message);
   }
   return Parser(source).ParseRig(root);
 }
 
 Rig ReadRigJson(const std::filesystem::path& path) {
-  std::ifstream stream(path, std::ios::binary);
-  if (!stream) throw InputError(path, "", "cannot open");
-  if (std::filesystem::is_directory(path)) throw InputError(path, "", "is a folder, not a file");
-  std::ostringstream text;
-  text << stream.rdbuf();
-  if (stream.bad()) throw InputError(path, "", "cannot read");
-  return ParseRigJson(text.str(), path);
+  return ParseRigJson(ReadInputFile(path), path);
 }
 
 std::string RigToJson(const Rig& rig) {

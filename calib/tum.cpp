@@ -1,15 +1,15 @@
 #include "calib/tum.h"
 
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <fstream>
 #include <sstream>
 #include <string>
 
 #include "calib/atomic_file.h"
 #include "calib/error.h"
+#include "calib/input_file.h"
+#include "calib/number_text.h"
 
 namespace omni {
 namespace {
@@ -21,25 +21,11 @@ constexpr double kQuaternionExactTolerance = 1e-12;
 
 constexpr int kNumTumFields = 8;
 
-// Parses the whole token as a finite double (strtod, so the C locale's '.' is the decimal
-// point).
-bool ParseDouble(const std::string& token, double* value) {
-  if (token.empty()) return false;
-  char* end = nullptr;
-  errno = 0;
-  const double parsed = std::strtod(token.c_str(), &end);
-  if (end != token.c_str() + token.size() || !std::isfinite(parsed)) return false;
-  *value = parsed;
-  return true;
-}
-
 }  // namespace
 
-std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
-  std::ifstream stream(path);
-  if (!stream) throw InputError(path, "", "cannot open");
-  if (std::filesystem::is_directory(path)) throw InputError(path, "", "is a folder, not a file");
+std::vector<StampedPose> ParseTum(const std::string& text, const std::filesystem::path& source) {
   std::vector<StampedPose> poses;
+  std::istringstream stream(text);
   std::string line;
   int line_number = 0;
   while (std::getline(stream, line)) {
@@ -53,17 +39,20 @@ std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
     std::vector<std::string> tokens;
     for (std::string token; fields >> token;) tokens.push_back(token);
     if (tokens.size() != kNumTumFields) {
-      throw InputError(path, where,
+      throw InputError(source, where,
                        "expected 8 values (timestamp tx ty tz qx qy qz qw), got " +
                            std::to_string(tokens.size()));
     }
     double values[kNumTumFields];
     for (int i = 0; i < kNumTumFields; ++i) {
-      if (!ParseDouble(tokens[i], &values[i])) {
-        throw InputError(
-            path, where,
-            "value " + std::to_string(i + 1) + " is not a number: \"" + tokens[i] + "\"");
+      if (!ParseDecimal(tokens[i], &values[i])) {
+        throw InputError(source, where,
+                         "value " + std::to_string(i + 1) + ": " + DecimalProblem(tokens[i]));
       }
+    }
+    if (!poses.empty() && !(values[0] > poses.back().timestamp)) {
+      throw InputError(source, where,
+                       "timestamps must increase: " + tokens[0] + " is not after the line before");
     }
     // TUM order: qx qy qz qw; Eigen's constructor takes w first.
     Eigen::Quaterniond rotation(values[7], values[4], values[5], values[6]);
@@ -71,7 +60,7 @@ std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
     if (!(std::abs(norm - 1.0) <= kQuaternionNormTolerance)) {
       std::ostringstream problem;
       problem << "expected a unit quaternion qx qy qz qw, norm is " << norm;
-      throw InputError(path, where, problem.str());
+      throw InputError(source, where, problem.str());
     }
     if (std::abs(norm - 1.0) > kQuaternionExactTolerance) rotation.normalize();
     StampedPose pose;
@@ -79,8 +68,11 @@ std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
     pose.world_from_rig = Rigid3d(rotation, Eigen::Vector3d(values[1], values[2], values[3]));
     poses.push_back(pose);
   }
-  if (stream.bad()) throw InputError(path, "", "cannot read");
   return poses;
+}
+
+std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
+  return ParseTum(ReadInputFile(path), path);
 }
 
 void WriteTum(const std::vector<StampedPose>& poses, const std::filesystem::path& path) {

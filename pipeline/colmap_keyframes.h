@@ -7,6 +7,7 @@
 // keyframes t' ≤ t) with one ray per observing image, starting at that camera's centre.
 
 #include <filesystem>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -14,9 +15,24 @@
 
 namespace omni {
 
-// Throws InputError when a file is missing or malformed. point_colors, when given, receives the
-// R G B of each point of points3D.txt.
+// Throws InputError naming the file and line when a file is missing or malformed: a line with
+// the wrong number of fields, a number that is not decimal or not finite, an identifier that is
+// not an unsigned 32-bit integer or is repeated, a quaternion not of unit norm (within 1e-3), an
+// image whose camera is not in cameras.txt or without its line of 2D points, a track naming an
+// unknown image. point_colors, when given, receives the R G B of
+// each point of points3D.txt.
 std::vector<SurfaceKeyframe> LoadColmapKeyframes(
     const std::filesystem::path& model, std::unordered_map<PointId, Rgb8>* point_colors = nullptr);
+
+// The three files' text, for ParseColmapKeyframes.
+struct ColmapTextModel {
+  std::string cameras;   // cameras.txt
+  std::string images;    // images.txt
+  std::string points3d;  // points3D.txt
+};
+// LoadColmapKeyframes on text in memory; `model` names the folder in the errors.
+std::vector<SurfaceKeyframe> ParseColmapKeyframes(
+    const ColmapTextModel& text, const std::filesystem::path& model,
+    std::unordered_map<PointId, Rgb8>* point_colors = nullptr);
 
 }  // namespace omni

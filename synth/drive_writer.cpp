@@ -207,6 +207,18 @@ std::string SceneJson(const SyntheticDrive& drive) {
   return j.dump(2) + "\n";
 }
 
+namespace {
+
+// The file that marks DRIVE.partial as synth's own (an interrupted run leaves it).
+constexpr const char* kPartialMarker = "INCOMPLETE";
+
+SynthSummary WriteStagedDrive(const SynthOptions& options, const SyntheticDrive& drive,
+                              const fs::path& out, const fs::path& staging,
+                              const SynthWriteOptions& write_options,
+                              std::chrono::steady_clock::time_point start);
+
+}  // namespace
+
 SynthSummary WriteSyntheticDrive(const SynthOptions& options, const Rig& rig,
                                  const fs::path& out_argument,
                                  const SynthWriteOptions& write_options) {
@@ -219,14 +231,49 @@ SynthSummary WriteSyntheticDrive(const SynthOptions& options, const Rig& rig,
     throw InputError(out_argument, "--out", "expected the path of a new folder");
   }
   const bool exists = fs::exists(out, ec);
-  if (exists && !write_options.force && !(fs::is_directory(out, ec) && fs::is_empty(out, ec))) {
-    throw InputError(out, "--out", "exists and is not empty (use --force to replace it)");
+  const bool empty_folder = fs::is_directory(out, ec) && fs::is_empty(out, ec);
+  if (exists && !write_options.force && !empty_folder) {
+    throw InputError(out, "--out", "exists and is not empty (--force replaces an earlier drive)");
+  }
+  if (exists && !empty_folder && !fs::exists(out / "gt" / "scene.json", ec)) {
+    throw InputError(out, "--out",
+                     "is not a drive written by synth (no gt/scene.json): not replaced, even with "
+                     "--force");
+  }
+  fs::path staging = out;
+  staging += ".partial";
+  if (fs::exists(staging, ec)) {
+    if (!fs::exists(staging / kPartialMarker, ec)) {
+      throw InputError(staging, "--out",
+                       "exists but is not left by an interrupted synth (no " +
+                           std::string(kPartialMarker) + "); move it away");
+    }
+    fs::remove_all(staging, ec);
   }
   const SyntheticDrive drive = MakeSyntheticDrive(options, rig);
 
-  fs::path staging = out;
-  staging += ".partial";
-  fs::remove_all(staging, ec);
+  fs::create_directories(staging, ec);
+  if (ec) throw InputError(out, "--out", "cannot create " + staging.string() + ": " + ec.message());
+  WriteTextFileAtomically(staging / kPartialMarker,
+                          "omnisculpt synth is writing this folder; it is renamed to " +
+                              out.filename().string() + " when complete.\n");
+  try {
+    return WriteStagedDrive(options, drive, out, staging, write_options, start);
+  } catch (...) {
+    // A failed run leaves nothing behind (a killed one leaves DRIVE.partial with its marker,
+    // which the next run removes).
+    fs::remove_all(staging, ec);
+    throw;
+  }
+}
+
+namespace {
+
+SynthSummary WriteStagedDrive(const SynthOptions& options, const SyntheticDrive& drive,
+                              const fs::path& out, const fs::path& staging,
+                              const SynthWriteOptions& write_options,
+                              std::chrono::steady_clock::time_point start) {
+  std::error_code ec;
   for (const Camera& camera : drive.rig.cameras) {
     fs::create_directories(staging / "images" / camera.name, ec);
     if (ec)
@@ -299,10 +346,15 @@ SynthSummary WriteSyntheticDrive(const SynthOptions& options, const Rig& rig,
   SynthSummary summary;
   summary.render_seconds = Seconds(render_start);
   // Publish: replace the old output only now.
+  fs::remove(staging / kPartialMarker, ec);
   if (fs::exists(out, ec)) {
+    // A name nobody uses: only the checked earlier drive is ever removed.
     fs::path old = out;
-    old += ".old";
-    fs::remove_all(old, ec);
+    old += ".replaced";
+    for (int k = 1; fs::exists(old, ec); ++k) {
+      old = out;
+      old += ".replaced" + std::to_string(k);
+    }
     fs::rename(out, old, ec);
     if (ec) throw InputError(out, "--out", "cannot replace: " + ec.message());
     fs::rename(staging, out, ec);
@@ -323,5 +375,7 @@ SynthSummary WriteSyntheticDrive(const SynthOptions& options, const Rig& rig,
   summary.total_seconds = Seconds(start);
   return summary;
 }
+
+}  // namespace
 
 }  // namespace omni::synth

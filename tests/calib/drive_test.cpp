@@ -203,31 +203,59 @@ TEST(Drive, CorruptOrVanishedImage) {
   TempDir dir;
   const auto folder = MakeDrive(dir, {"1.png", "2.png"}, {"1.png", "2.png"});
   const auto corrupt = folder / "images" / "left" / "2.png";
-  WriteBytes(corrupt, "\x89PNG garbage garbage garbage garbage");
+  WriteBytes(corrupt, "\x89PNG\r\n\x1a\n garbage garbage garbage garbage");
   const Drive drive = Drive::Open(folder);
-  EXPECT_EQ(LoadError(drive, 1, 0), corrupt.string() + ": cannot read image (missing or corrupt)");
+  EXPECT_EQ(LoadError(drive, 1, 0),
+            corrupt.string() + ": truncated PNG (chunk bage runs past the end of the file)");
   const auto vanished = folder / "images" / "right" / "1.png";
   std::filesystem::remove(vanished);
-  EXPECT_EQ(LoadError(drive, 0, 1), vanished.string() + ": cannot read image (missing or corrupt)");
+  EXPECT_EQ(LoadError(drive, 0, 1), vanished.string() + ": cannot open");
 }
 
-TEST(Drive, ColourAndSixteenBitImagesLoadAsEightBitGrey) {
+// Damaged files are found before the decoders see them (they would print their own line on
+// stderr naming no file), each problem named.
+TEST(Drive, DamagedImageFilesAreNamedBeforeDecoding) {
+  std::vector<uint8_t> png;
+  cv::imencode(".png", FrameImage(3, kWidth, kHeight), png);
+  const std::string whole(png.begin(), png.end());
+  EXPECT_EQ(ImageFileProblem(whole), "");
+  EXPECT_EQ(ImageFileProblem(""), "empty file (0 bytes)");
+  EXPECT_EQ(ImageFileProblem(whole.substr(0, whole.size() / 2)).rfind("truncated PNG", 0), 0u);
+  EXPECT_EQ(ImageFileProblem(whole.substr(0, whole.size() - 1)),
+            "truncated PNG (the file ends before its IEND chunk)");
+  std::string flipped = whole;
+  flipped[flipped.size() / 2] ^= 0x10;
+  EXPECT_EQ(ImageFileProblem(flipped), "corrupt PNG (chunk IDAT fails its CRC check)");
+  EXPECT_EQ(ImageFileProblem("P5\n32 24\n255\n" + std::string(32 * 24, '\0')),
+            "not a PNG or JPEG image (its first bytes are neither signature)");
+
+  std::vector<uint8_t> jpeg;
+  cv::imencode(".jpg", FrameImage(5, kWidth, kHeight), jpeg);
+  const std::string jpeg_whole(jpeg.begin(), jpeg.end());
+  EXPECT_EQ(ImageFileProblem(jpeg_whole), "");
+  EXPECT_EQ(ImageFileProblem(jpeg_whole.substr(0, jpeg_whole.size() - 2)),
+            "truncated JPEG (the file ends before its end-of-image marker)");
+  EXPECT_EQ(ImageFileProblem(jpeg_whole.substr(0, jpeg_whole.size() / 2)),
+            "truncated JPEG (the file ends before its end-of-image marker)");
+}
+
+// A 16-bit PNG is refused (dividing by 256 would hide a wrong export); colour is converted.
+TEST(Drive, ColourLoadsAsGreyAndSixteenBitIsRefused) {
   TempDir dir;
   const auto folder = MakeDrive(dir, {}, {});
   // Pure green in BGR: grey = 0.587 * 255 = 149.7.
   WriteImage(folder / "images" / "left" / "1.png",
              cv::Mat(kHeight, kWidth, CV_8UC3, cv::Scalar(0, 255, 0)));
-  WriteImage(folder / "images" / "right" / "1.png",
-             cv::Mat(kHeight, kWidth, CV_16UC1, cv::Scalar(100 * 256 + 37)));
+  const auto deep = folder / "images" / "right" / "1.png";
+  WriteImage(deep, cv::Mat(kHeight, kWidth, CV_16UC1, cv::Scalar(100 * 256 + 37)));
   const Drive drive = Drive::Open(folder);
   const cv::Mat colour = drive.LoadGray(0, 0);
   EXPECT_EQ(colour.type(), CV_8UC1);
   EXPECT_EQ(colour.size(), cv::Size(kWidth, kHeight));
   EXPECT_NEAR(colour.at<uint8_t>(3, 4), 150, 1);
-  const cv::Mat deep = drive.LoadGray(0, 1);
-  EXPECT_EQ(deep.type(), CV_8UC1);
-  EXPECT_EQ(deep.size(), cv::Size(kWidth, kHeight));
-  EXPECT_NEAR(deep.at<uint8_t>(3, 4), 100, 1);
+  const std::string message = LoadError(drive, 0, 1);
+  EXPECT_EQ(message.rfind(deep.string() + ": 16-bit PNG: expected 8 bits per channel", 0), 0u)
+      << message;
 }
 
 // frames.csv: a frame's timestamp is the mean of its cameras' rows; a drive without it has
@@ -261,6 +289,13 @@ TEST(DriveTest, FrameTimestampsFromFramesCsv) {
   refused("frame,camera,timestamp_s\n0,left,1\n", "no row for frame \"1\"");
   refused("frame,camera,timestamp_s\n0,left,2\n1,left,1\n", "must increase");
   refused("frame,camera\n0,left\n", "timestamp_s");
+  refused("frame,camera,timestamp_s\n0,left,1\n0,left,1\n1,left,2\n",
+          "line 3: a second row for frame \"0\" camera \"left\"");
+  refused("frame,camera,timestamp_s\n0,left,1e309\n1,left,2\n",
+          "line 2: timestamp_s: number out of range (too large for a double)");
+  refused("frame,camera,timestamp_s\n0,left,1.7e308\n0,right,1.7e308\n1,left,2\n",
+          "frame \"0\": timestamp_s out of range");
+  refused("frame,camera,timestamp_s\n0,left\n", "line 2: expected 3 fields, got 2");
 }
 
 }  // namespace

@@ -345,6 +345,14 @@ TEST_F(ImportTest, LadybugRejectsMalformedLinesWithLineNumbers) {
       {header + "BeginCamera\nfocalLength 0.4 0.5\nCenter 0 0 0 0.5 0.5\nEndCamera\n",
        "camera block at line 3", "CamToLadybugEulerZYX"},
       {good_block, "Resolution", "missing"},
+      {"Resolution 0x400 768\n" + good_block, "line 1", "Resolution"},
+      {"Resolution 1e12 768\n" + good_block, "line 1", "up to 65536"},
+      {header + "BeginCamera\nfocalLength 1e20 0.5\nCamToLadybugEulerZYX 0 0 0 0 0 0\n"
+                "Center 0 0 0 0.5 0.5\nEndCamera\n",
+       "cameras[0].params[0]", "expected a focal length fx"},
+      {header + "BeginCamera\nfocalLength 0.4 0.5\nCamToLadybugEulerZYX 0 0 0 1e300 0 0\n"
+                "Center 0 0 0 0.5 0.5\nEndCamera\n",
+       "cameras[0].cam_from_rig.t", "within 100 m"},
   };
   for (const Case& c : cases) {
     const fs::path path = Write("bad.conf", c.text);
@@ -354,6 +362,42 @@ TEST_F(ImportTest, LadybugRejectsMalformedLinesWithLineNumbers) {
     } catch (const InputError& error) {
       EXPECT_EQ(error.field(), c.field) << error.what();
       EXPECT_EQ(error.file(), path);
+      EXPECT_NE(std::string(error.what()).find(c.mentions), std::string::npos) << error.what();
+    }
+  }
+}
+
+// Malformed YAML nodes, numbers out of range and implausible cameras are bad input naming the
+// file, never a parser's exception.
+TEST_F(ImportTest, KalibrRejectsOverflowOddNodesAndImplausibleCameras) {
+  const std::string camera =
+      KalibrCamera(0, "pinhole", "none", "", "[400, 400, 320, 240]", "[640, 480]", "");
+  EXPECT_NO_THROW(ImportKalibr(Write("good.yaml", camera)));
+  struct Case {
+    std::string text;
+    std::string mentions;
+  };
+  const Case cases[] = {
+      {KalibrCamera(0, "pinhole", "none", "", "[400, 400, 320, 240]", "[1e300, 480]", ""),
+       "cam0.resolution: expected two positive integers up to 65536"},
+      {KalibrCamera(0, "pinhole", "none", "", "[1e309, 400, 320, 240]", "[640, 480]", ""),
+       "cam0.intrinsics: expected 4 numbers"},
+      {KalibrCamera(0, "pinhole", "none", "", "[0x10, 400, 320, 240]", "[640, 480]", ""),
+       "cam0.intrinsics: expected 4 numbers"},
+      {KalibrCamera(0, "pinhole", "none", "", "[1e20, 400, 320, 240]", "[640, 480]", ""),
+       "cameras[0].params[0]: expected a focal length fx"},
+      {"? [a, b]\n: 1\n" + camera, "malformed YAML"},
+      {"cam99999999999:\n  camera_model: pinhole\n", "cam0: missing"},
+      {"cam0: [1, 2]\n", "cam0: expected a map"},
+      {"cam0:\n  camera_model: {a: 1}\n", "cam0.camera_model: expected a string"},
+  };
+  for (const Case& c : cases) {
+    const fs::path path = Write("bad.yaml", c.text);
+    try {
+      ImportKalibr(path);
+      ADD_FAILURE() << "no error for:\n" << c.text;
+    } catch (const InputError& error) {
+      EXPECT_EQ(error.file(), path) << error.what();
       EXPECT_NE(std::string(error.what()).find(c.mentions), std::string::npos) << error.what();
     }
   }

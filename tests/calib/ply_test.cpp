@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <limits>
 #include <random>
 
 #include "calib/error.h"
@@ -314,7 +315,95 @@ TEST(Ply, NonNumberInAsciiIsRejected) {
   WriteBytes(path,
              "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
              "property float z\nend_header\n0 zero 0\n");
-  EXPECT_TRUE(Contains(MeshError(path), "element vertex: expected a number"));
+  EXPECT_TRUE(Contains(MeshError(path), "element vertex: expected a decimal number"));
+}
+
+// The header describes the data exactly: no bytes after the last element (a count lower than
+// the data is caught there), and ascii may end in white space only.
+TEST(Ply, TrailingBytesAndLowCountsAreRejected) {
+  TempDir dir;
+  TriangleMesh mesh;
+  mesh.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  mesh.triangles = {{0, 1, 2}};
+  const auto path = dir / "extra.ply";
+  WritePlyMesh(mesh, path);
+  const std::string bytes = ReadBytes(path);
+  WriteBytes(path, bytes + "x");
+  EXPECT_EQ(MeshError(path),
+            path.string() +
+                ": data: 1 byte(s) after the last element of the header (its counts are lower than "
+                "the data)");
+  // One face fewer in the header than in the data.
+  std::string low = bytes;
+  low.replace(low.find("element face 1"), 14, "element face 0");
+  WriteBytes(path, low);
+  EXPECT_TRUE(
+      Contains(MeshError(path), path.string() + ": data: 13 byte(s) after the last element"));
+  // Ascii: trailing white space is fine, a value more is not.
+  const std::string ascii =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  WriteBytes(path, ascii + "\n  \r\n");
+  EXPECT_EQ(ReadPlyMesh(path).triangles.size(), 1u);
+  WriteBytes(path, ascii + "3 0 1 2\n");
+  // The count starts after the last value read ("2", before its newline).
+  EXPECT_TRUE(
+      Contains(MeshError(path), path.string() + ": data: 9 byte(s) after the last element"));
+}
+
+TEST(Ply, NonFiniteCoordinatesAreRejected) {
+  TempDir dir;
+  const auto path = dir / "nan.ply";
+  const float values[] = {std::numeric_limits<float>::quiet_NaN(),
+                          std::numeric_limits<float>::infinity(),
+                          -std::numeric_limits<float>::infinity()};
+  for (const float value : values) {
+    std::string bytes =
+        "ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\n"
+        "property float y\nproperty float z\nend_header\n";
+    for (const float v : {0.0f, 0.0f, 0.0f, 1.0f, value, 2.0f}) Put(v, false, &bytes);
+    WriteBytes(path, bytes);
+    EXPECT_TRUE(Contains(MeshError(path),
+                         path.string() + ": element vertex: vertex 1: expected finite coordinates"))
+        << value;
+  }
+  // Ascii: strtod's inf, nan and hexadecimal are not decimal numbers; 1e39 overflows a float's
+  // range only once stored, so it is read as a double and kept finite.
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+      "property float z\nend_header\n";
+  for (const char* token_text : {"inf", "nan", "0x10", "-Infinity"}) {
+    const std::string token = token_text;
+    WriteBytes(path, head + "0 " + token + " 0\n");
+    EXPECT_EQ(MeshError(path),
+              path.string() + ": element vertex: expected a decimal number, got \"" + token + "\"")
+        << token;
+  }
+  WriteBytes(path, head + "0 1e309 0\n");
+  EXPECT_TRUE(Contains(MeshError(path), "number out of range (too large for a double): \"1e309\""));
+}
+
+TEST(Ply, AsciiIntegersMustFitTheirType) {
+  TempDir dir;
+  const auto path = dir / "ints.ply";
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n";
+  for (const char* face_text :
+       {"3 0 1 2.5", "256 0 1 2", "3 0 1 1e300", "3 0 1 4294967296", "-1 0 1 2", "3 0 1 0x2"}) {
+    const std::string face = face_text;
+    WriteBytes(path, head + face + "\n");
+    EXPECT_TRUE(
+        Contains(MeshError(path), path.string() + ": element face: expected an integer of type "))
+        << face;
+  }
+  // A list longer than what is left of the file is truncated data, found before reading it.
+  WriteBytes(path, head.substr(0, head.find("uchar int")) +
+                       "uint int vertex_indices\nend_header\n" +
+                       "0 0 0\n1 0 0\n0 1 0\n4000000000 0 1 2\n");
+  EXPECT_TRUE(Contains(MeshError(path), "element face: truncated data"));
 }
 
 TEST(Ply, MissingFile) {

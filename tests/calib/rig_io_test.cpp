@@ -138,14 +138,89 @@ TEST(RigJson, SampleLadybugRigReadsAndRoundTrips) {
   EXPECT_EQ(RigToJson(again), RigToJson(rig));
 }
 
-TEST(RigJson, CentralIsOptionalAndExtraFieldsAreIgnored) {
+TEST(RigJson, CentralIsRequiredAndExtraFieldsAreIgnored) {
   Json json = ValidJson();
-  json.erase("central");
   json["comment"] = "made by hand";
   json["cameras"][0]["serial"] = 12345;
   const Rig rig = ParseRigJson(json.dump(), "rig.json");
-  EXPECT_TRUE(rig.central);
+  EXPECT_FALSE(rig.central);
   EXPECT_EQ(rig.NumCameras(), 4u);
+  json.erase("central");
+  EXPECT_EQ(ParseError(json),
+            "rig.json: central: missing field (expected true (one central camera, the paper's "
+            "approximation) or false)");
+}
+
+// Numbers too large for a double are bad input naming the file, not a parser's exception.
+TEST(RigJson, NumberOverflowNamesTheFile) {
+  const std::string valid = RigToJson(MakeRig());
+  const std::string width = "\"width\": 384";  // cameras[0].width
+  ASSERT_NE(valid.find(width), std::string::npos);
+  for (const std::string& number : {std::string("1e309"), std::string(400, '9')}) {
+    std::string text = valid;
+    text.replace(text.find(width), width.size(), "\"width\": " + number);
+    try {
+      ParseRigJson(text, "my/rig.json");
+      ADD_FAILURE() << "accepted " << number.substr(0, 20);
+    } catch (const InputError& error) {
+      const std::string message = error.what();
+      EXPECT_EQ(message.rfind("my/rig.json: invalid JSON: number overflow", 0), 0u) << message;
+    }
+  }
+}
+
+// Finite values no real camera or rig has are refused, naming the field and the range.
+TEST(RigJson, ImplausibleValuesAreRefused) {
+  Json json = ValidJson();  // camera 0: 384x512
+  json["cameras"][0]["params"][0] = 1e20;
+  EXPECT_EQ(ParseError(json),
+            "rig.json: cameras[0].params[0]: expected a focal length fx in [5.12, 51200] pixels "
+            "for a camera of 384x512, got 1e+20");
+  json = ValidJson();
+  json["cameras"][1]["params"][1] = 1.0;
+  EXPECT_NE(ParseError(json).find("cameras[1].params[1]: expected a focal length fy in"),
+            std::string::npos);
+  json = ValidJson();
+  json["cameras"][0]["params"][2] = 1e39;
+  EXPECT_EQ(ParseError(json),
+            "rig.json: cameras[0].params[2]: expected a principal point cx in [-384, 768] "
+            "pixels for a camera of 384x512, got 1e+39");
+  json = ValidJson();
+  json["cameras"][0]["params"][3] = -600;
+  EXPECT_NE(ParseError(json).find("cameras[0].params[3]: expected a principal point cy in "
+                                  "[-512, 1024]"),
+            std::string::npos);
+  json = ValidJson();
+  json["cameras"][1]["params"][4] = 5e3;  // k1 of an opencv camera
+  EXPECT_EQ(ParseError(json),
+            "rig.json: cameras[1].params[4]: expected a distortion coefficient in [-1000, 1000], "
+            "got 5000");
+  json = ValidJson();
+  json["cameras"][2]["cam_from_rig"]["t"] = {1e308, 0, 0};
+  EXPECT_EQ(ParseError(json),
+            "rig.json: cameras[2].cam_from_rig.t: expected a camera within 100 m of the rig's "
+            "origin, got [1e+308, 0, 0]");
+  json = ValidJson();
+  json["cameras"][3]["width"] = 100000;
+  EXPECT_EQ(ParseError(json),
+            "rig.json: cameras[3].width: expected at most 65536 pixels, got 100000");
+}
+
+// The project's rigs and the real drives' rigs are within the ranges.
+TEST(RigJson, ProjectAndRealRigsAreAccepted) {
+  const std::filesystem::path source(OMNI_SOURCE_DIR);
+  for (const char* name : {"ladybug-like", "pinhole", "car", "fisheye5"}) {
+    EXPECT_NO_THROW(ReadRigJson(source / "data" / "rigs" / (std::string(name) + ".json"))) << name;
+  }
+  const std::filesystem::path real = source.parent_path() / "shared" / "data" / "real";
+  ASSERT_TRUE(std::filesystem::is_directory(real)) << real;
+  int read = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(real)) {
+    if (!std::filesystem::exists(entry.path() / "rig.json")) continue;
+    EXPECT_NO_THROW(ReadRigJson(entry.path() / "rig.json")) << entry.path();
+    ++read;
+  }
+  EXPECT_GE(read, 2);
 }
 
 TEST(RigJson, NearlyUnitQuaternionIsNormalised) {

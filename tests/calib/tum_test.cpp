@@ -31,8 +31,8 @@ TEST(Tum, RoundTripTo1e9) {
   std::vector<StampedPose> poses;
   for (int i = 0; i < 50; ++i) {
     StampedPose pose;
-    // Small and large (Unix-time) stamps with more digits than 1e-9.
-    pose.timestamp = i % 2 ? 1.6e9 + i / 7.0 : i / 3.0 + 1e-11;
+    // Small and large (Unix-time) stamps with more digits than 1e-9, increasing.
+    pose.timestamp = i >= 25 ? 1.6e9 + i / 7.0 : i / 3.0 + 1e-11;
     pose.world_from_rig.rotation =
         Eigen::Quaterniond(normal(rng), normal(rng), normal(rng), normal(rng)).normalized();
     pose.world_from_rig.translation = Eigen::Vector3d(uniform(rng), uniform(rng), uniform(rng));
@@ -82,9 +82,46 @@ TEST(Tum, NonNumberNamesTheLine) {
   TempDir dir;
   const auto path = dir / "text.tum";
   WriteBytes(path, "0 0 0 0 0 0 0 1\n1 0 abc 0 0 0 0 1\n");
-  EXPECT_EQ(ReadError(path), path.string() + ": line 2: value 3 is not a number: \"abc\"");
+  EXPECT_EQ(ReadError(path),
+            path.string() + ": line 2: value 3: expected a decimal number, got \"abc\"");
   WriteBytes(path, "0 0 0 0 0 0 0 1x\n");
-  EXPECT_EQ(ReadError(path), path.string() + ": line 1: value 8 is not a number: \"1x\"");
+  EXPECT_EQ(ReadError(path),
+            path.string() + ": line 1: value 8: expected a decimal number, got \"1x\"");
+}
+
+TEST(Tum, HexadecimalInfinityAndNanAreNotNumbers) {
+  TempDir dir;
+  const auto path = dir / "odd.tum";
+  // strtod reads all of these; a TUM file has decimal numbers only.
+  for (const char* token_text : {"0x10", "inf", "-INF", "nan", "1e", ".", "+-1", "1.2.3"}) {
+    const std::string token = token_text;
+    WriteBytes(path, "0 0 0 0 0 0 0 1\n" + token + " 0 0 0 0 0 0 1\n");
+    EXPECT_EQ(ReadError(path),
+              path.string() + ": line 2: value 1: expected a decimal number, got \"" + token + "\"")
+        << token;
+  }
+  WriteBytes(path, "0 1e309 0 0 0 0 0 1\n");
+  EXPECT_EQ(ReadError(path), path.string() +
+                                 ": line 1: value 2: number out of range (too large for a "
+                                 "double): \"1e309\"");
+  // Plain decimal forms that are numbers.
+  WriteBytes(path, "-1.5e-3 +2 .5 3. 0 0 0 1\n1E2 0 0 0 0 0 0 1\n");
+  const std::vector<StampedPose> poses = ReadTum(path);
+  ASSERT_EQ(poses.size(), 2u);
+  EXPECT_EQ(poses[0].timestamp, -1.5e-3);
+  EXPECT_EQ(poses[0].world_from_rig.translation, Eigen::Vector3d(2.0, 0.5, 3.0));
+  EXPECT_EQ(poses[1].timestamp, 100.0);
+}
+
+TEST(Tum, TimestampsMustIncreaseStrictly) {
+  TempDir dir;
+  const auto path = dir / "order.tum";
+  WriteBytes(path, "1 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n");
+  EXPECT_EQ(ReadError(path),
+            path.string() + ": line 3: timestamps must increase: 2 is not after the line before");
+  WriteBytes(path, "# t\n5 0 0 0 0 0 0 1\n\n4.5 0 0 0 0 0 0 1\n");
+  EXPECT_EQ(ReadError(path),
+            path.string() + ": line 4: timestamps must increase: 4.5 is not after the line before");
 }
 
 TEST(Tum, NonUnitQuaternionNamesTheLine) {

@@ -99,12 +99,19 @@ TEST(DriveLoadRgb, ColourImagesComeRedFirstAndGreyOnesAsThreeEqualChannels) {
   EXPECT_EQ(g[2], g[0]);
   EXPECT_THROW(drive.LoadRgb(1, 0), InputError);
 
-  // 16-bit colour and BGRA files: 8-bit RGB too.
+  // BGRA files: 8-bit RGB too; 16-bit files are refused (calib/drive.h), naming the file.
   cv::Mat deep(kHeight, kWidth, CV_16UC3, cv::Scalar(30 * 256, 20 * 256, 10 * 256));  // B G R
   cv::Mat alpha(kHeight, kWidth, CV_8UC4, cv::Scalar(3, 2, 1, 128));
   ASSERT_TRUE(cv::imwrite(drive.ImagePath(0, 0).string(), deep));
   ASSERT_TRUE(cv::imwrite(drive.ImagePath(0, 1).string(), alpha));
-  EXPECT_EQ(drive.LoadRgb(0, 0).at<cv::Vec3b>(5, 5), cv::Vec3b(10, 20, 30));
+  try {
+    drive.LoadRgb(0, 0);
+    ADD_FAILURE() << "a 16-bit PNG was read";
+  } catch (const InputError& error) {
+    EXPECT_EQ(std::string(error.what()).rfind(drive.ImagePath(0, 0).string() + ": 16-bit PNG", 0),
+              0u)
+        << error.what();
+  }
   EXPECT_EQ(drive.LoadRgb(0, 1).at<cv::Vec3b>(5, 5), cv::Vec3b(1, 2, 3));
 }
 

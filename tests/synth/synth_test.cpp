@@ -162,7 +162,7 @@ TEST(SynthDriveTest, SameSeedSameBytesOtherSeedOtherBytes) {
   for (const fs::path& folder : {a, b, c}) fs::remove_all(folder);
 }
 
-TEST(SynthDriveTest, RefusesNonEmptyOutputUnlessForcedAndReplacesAtTheEnd) {
+TEST(SynthDriveTest, RefusesNonEmptyOutputAndForceReplacesOnlyAnEarlierDrive) {
   SynthWriteOptions write_options;
   write_options.progress = false;
   const fs::path out = TempFolder("force");
@@ -170,13 +170,26 @@ TEST(SynthDriveTest, RefusesNonEmptyOutputUnlessForcedAndReplacesAtTheEnd) {
   std::ofstream(out / "keep.txt") << "old";
   EXPECT_THROW(WriteSyntheticDrive(SmallOptions(3), DefaultRig(), out, write_options), InputError);
   EXPECT_TRUE(fs::exists(out / "keep.txt"));
+  // A folder of the user's is not replaced, even with force.
   write_options.force = true;
+  EXPECT_THROW(WriteSyntheticDrive(SmallOptions(3), DefaultRig(), out, write_options), InputError);
+  EXPECT_TRUE(fs::exists(out / "keep.txt"));
+  EXPECT_FALSE(fs::exists(out.string() + ".partial"));
+  fs::remove(out / "keep.txt");
+  // An earlier drive is, at the end, and a user's DRIVE.replaced stays untouched.
+  write_options.force = false;
   WriteSyntheticDrive(SmallOptions(3), DefaultRig(), out, write_options);
-  EXPECT_FALSE(fs::exists(out / "keep.txt"));
+  const fs::path users = out.string() + ".replaced";
+  fs::create_directories(users);
+  std::ofstream(users / "keep.txt") << "mine";
+  write_options.force = true;
+  WriteSyntheticDrive(SmallOptions(4), DefaultRig(), out, write_options);
   EXPECT_TRUE(fs::exists(out / "gt" / "scene.json"));
   EXPECT_FALSE(fs::exists(out.string() + ".partial"));
-  EXPECT_FALSE(fs::exists(out.string() + ".old"));
+  EXPECT_FALSE(fs::exists(out.string() + ".replaced1"));
+  EXPECT_TRUE(fs::exists(users / "keep.txt"));
   fs::remove_all(out);
+  fs::remove_all(users);
 }
 
 TEST_F(TinyDriveTest, HitsReprojectToTheirPixelAndLieOnTheWrittenMesh) {

@@ -1,0 +1,8 @@
+// TUM trajectories (calib/tum.h).
+#include "calib/tum.h"
+#include "fuzz/fuzz_input.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  const std::string text = omni::fuzz::AsText(data, size);
+  return omni::fuzz::ParseOrRefuse([&] { omni::ParseTum(text, "poses.tum"); });
+}

@@ -9,6 +9,7 @@
 #include "sfm/synthetic.h"
 #include "sfm/track_builder.h"
 #include "tests/calib/options_error_check.h"
+#include "tests/sfm/test_util.h"
 
 namespace omni {
 namespace {
@@ -81,12 +82,7 @@ TEST(TrackBuilder, RematchByDescriptorsFollowsTheKeyframeAcrossCameras) {
   // Two cameras. The keyframe: camera 0 sees texture A, camera 1 texture B. The next frame:
   // the rig turned, camera 1 now sees texture A moved by 70 pixels (no motion model predicts
   // that), camera 0 an unrelated texture.
-  Rig rig = MakeSyntheticRingRig(2, false, 0.0);
-  for (Camera& camera : rig.cameras) {
-    camera.width = 400;
-    camera.height = 300;
-    camera.params = {200.0, 200.0, 199.5, 149.5};
-  }
+  Rig rig = test::TwoCameraRig();
   TrackBuilder builder(rig, TrackBuilderOptions{});
   const TrackedFrame keyframe =
       builder.AddFrame({MakeSyntheticTexture(400, 300, Eigen::Vector2d::Zero(), 250, 11),

@@ -9,20 +9,12 @@
 #include "sfm/synthetic.h"
 #include "sfm/track_builder.h"
 #include "tests/calib/options_error_check.h"
+#include "tests/sfm/test_util.h"
 
 namespace omni {
 namespace {
 
-// Two cameras of 400x300 pixels (f = 200).
-Rig TwoCameraRig() {
-  Rig rig = MakeSyntheticRingRig(2, false, 0.0);
-  for (Camera& camera : rig.cameras) {
-    camera.width = 400;
-    camera.height = 300;
-    camera.params = {200.0, 200.0, 199.5, 149.5};
-  }
-  return rig;
-}
+using test::TwoCameraRig;
 
 // The texture camera 0 saw in frame 0 appears in camera 1 of frame 1 moved by `shift` (a
 // point that left camera A for camera B); camera 0 of frame 1 sees an unrelated texture. The

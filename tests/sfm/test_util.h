@@ -9,6 +9,17 @@
 
 namespace omni::test {
 
+// Two cameras of 400x300 pixels (f = 200) for the image front-end tests.
+inline Rig TwoCameraRig() {
+  Rig rig = MakeSyntheticRingRig(2, false, 0.0);
+  for (Camera& camera : rig.cameras) {
+    camera.width = 400;
+    camera.height = 300;
+    camera.params = {200.0, 200.0, 199.5, 149.5};
+  }
+  return rig;
+}
+
 // Expects at least min_share of the true inliers kept and at most 1 − min_share of the true
 // outliers kept by a RANSAC inlier mask.
 inline void ExpectMaskMatchesTruth(const std::vector<char>& mask,

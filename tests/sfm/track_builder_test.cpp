@@ -7,18 +7,14 @@
 
 #include "sfm/synthetic.h"
 #include "tests/calib/options_error_check.h"
+#include "tests/sfm/test_util.h"
 
 namespace omni {
 namespace {
 
 TEST(TrackBuilder, ChainsTracksAlongAShiftedSequence) {
   // Two cameras; each sees the texture moving by its own constant shift per frame.
-  Rig rig = MakeSyntheticRingRig(2, false, 0.0);
-  for (Camera& camera : rig.cameras) {
-    camera.width = 400;
-    camera.height = 300;
-    camera.params = {200.0, 200.0, 199.5, 149.5};
-  }
+  Rig rig = test::TwoCameraRig();
   const Eigen::Vector2d shifts[2] = {Eigen::Vector2d(6.0, 1.5), Eigen::Vector2d(-4.5, -3.0)};
   TrackBuilderOptions options;
   options.search_radius = 12.0;  // the first frame has no flow yet: the shift must fit

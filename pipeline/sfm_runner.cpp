@@ -115,12 +115,13 @@ struct SfmRunner::Impl {
                : tracker_frame;
   }
 
-  // The row's pose relative to the newest keyframe.
-  void SetReference(SfmFrameRow* row, const Rigid3d& world_from_rig) const {
-    const std::vector<Rigid3d> keyframe_poses = tracker.KeyframePoses();
-    if (keyframe_poses.empty()) return;
-    row->reference_keyframe = static_cast<int>(keyframe_poses.size()) - 1;
-    row->keyframe_from_rig = keyframe_poses.back().Inverse() * world_from_rig;
+  // The row's pose relative to keyframe `keyframe` (none when the tracker has no such
+  // keyframe).
+  void SetReference(SfmFrameRow* row, int keyframe) const {
+    row->reference_keyframe = -1;
+    if (keyframe < 0 || keyframe >= tracker.NumKeyframes()) return;
+    row->reference_keyframe = keyframe;
+    row->keyframe_from_rig = tracker.KeyframePose(keyframe).Inverse() * row->result.world_from_rig;
   }
   // The tracker's second thoughts on earlier frames (see Tracker::TakeRevisedFrames).
   void ApplyRevisions() {
@@ -131,15 +132,8 @@ struct SfmRunner::Impl {
                            [](const SfmFrameRow& r, size_t frame) { return r.frame < frame; });
       if (row == result.frames.end() || row->frame != input) continue;
       row->result = revision.result;
-      row->reference_keyframe = -1;
-      if (row->result.tracked) {
-        // Frames resected in a new map: relative to its first keyframe.
-        const std::vector<Rigid3d> keyframe_poses = tracker.KeyframePoses();
-        if (!keyframe_poses.empty()) {
-          row->reference_keyframe = 0;
-          row->keyframe_from_rig = keyframe_poses[0].Inverse() * row->result.world_from_rig;
-        }
-      }
+      // Frames resected in a new map: relative to its first keyframe.
+      SetReference(&*row, row->result.tracked ? 0 : -1);
     }
   }
 
@@ -230,7 +224,7 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
     }
     s.builder.SetFrameResult(row.result.tracked, row.result.keyframe);
     if (row.result.tracked) {
-      s.SetReference(&row, row.result.world_from_rig);
+      s.SetReference(&row, s.tracker.NumKeyframes() - 1);  // the newest keyframe
     } else {
       spdlog::warn("frame {}: not tracked ({}){}", name, row.result.status,
                    tracked.relocalising ? ", re-localising against the last keyframes" : "");

@@ -48,7 +48,16 @@ TrackBuilder::TrackBuilder(const Rig& rig, const TrackBuilderOptions& options)
     : rig_(rig),
       options_(CheckedOptions(options, "TrackBuilderOptions")),
       cameras_(rig.NumCameras()),
-      map_search_(rig, options.map_search, options.harris.downscale) {}
+      map_search_(rig, options.map_search, options.harris.downscale) {
+  // The camera pairs that see common directions (a property of the rig).
+  const int num_cameras = static_cast<int>(rig.NumCameras());
+  for (int a = 0; a < num_cameras; ++a)
+    for (int b = a + 1; b < num_cameras; ++b) {
+      if (ComputeViewOverlap(rig, a, b, 16) < 0.05 && ComputeViewOverlap(rig, b, a, 16) < 0.05)
+        continue;
+      overlapping_pairs_.emplace_back(a, b);
+    }
+}
 
 TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
                                     const PixelPredictor& predict) {
@@ -59,8 +68,9 @@ TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
   }
   const int num_cameras = static_cast<int>(images.size());
   TrackedFrame frame;
-  frame.relocalising = lost_ && !keyframe_cameras_.empty();
-  const std::vector<CameraState>& sources = frame.relocalising ? keyframe_cameras_ : cameras_;
+  frame.relocalising = lost_ && !keyframe_history_.empty();
+  const std::vector<CameraState>& sources =
+      frame.relocalising ? keyframe_history_.front().second : cameras_;
   // The previous frame's corners, with their final tracks (after the map-point search), are
   // the most recent observations of their tracks: their windows become the references.
   if (options_.map_search.enabled && frame_index_ >= 0) {
@@ -176,16 +186,19 @@ const cv::Mat& TrackBuilder::Describe(CameraState* state) const {
   return state->descriptors;
 }
 
+bool TrackBuilder::LastTrackedIsOwnReference() const {
+  return last_tracked_.first >= 0 &&
+         (keyframe_history_.empty() || keyframe_history_[0].first != last_tracked_.first);
+}
+
 int TrackBuilder::NumRematchReferences() const {
-  const bool own_entry =
-      last_tracked_.first >= 0 &&
-      (keyframe_history_.empty() || keyframe_history_[0].first != last_tracked_.first);
-  return static_cast<int>(keyframe_history_.size()) + (own_entry ? 1 : 0);
+  if (options_.rematch_keyframes == 0) return 0;
+  return static_cast<int>(keyframe_history_.size()) + (LastTrackedIsOwnReference() ? 1 : 0);
 }
 
 std::vector<TrackBuilder::CameraState>* TrackBuilder::RematchReference(int reference) {
   if (reference < 0 || reference >= NumRematchReferences()) return nullptr;
-  const bool own_entry = NumRematchReferences() > static_cast<int>(keyframe_history_.size());
+  const bool own_entry = LastTrackedIsOwnReference();
   if (own_entry && reference == 0) return &last_tracked_.second;
   return &keyframe_history_[reference - (own_entry ? 1 : 0)].second;
 }
@@ -198,9 +211,12 @@ bool TrackBuilder::RematchByDescriptors(int reference, TrackedFrame* frame) {
   const int num_cameras = static_cast<int>(cameras_.size());
   // All cameras against all: a rig that turned sees a point in another camera.
   std::vector<std::pair<int, int>> rows_now, rows_then;  // (camera, corner) of each row
+  // The descriptors of both frames' cameras, in parallel (each state is described once).
+  tbb::parallel_for(0, 2 * num_cameras, [&](int task) {
+    Describe(task < num_cameras ? &cameras_[task] : &keyframe[task - num_cameras]);
+  });
   cv::Mat now, then;
   for (int c = 0; c < num_cameras; ++c) {
-    tbb::parallel_for(0, 2, [&](int which) { Describe(which == 0 ? &cameras_[c] : &keyframe[c]); });
     now.push_back(cameras_[c].descriptors);
     then.push_back(keyframe[c].descriptors);
     for (size_t i = 0; i < cameras_[c].corners.size(); ++i) rows_now.emplace_back(c, i);
@@ -236,56 +252,52 @@ bool TrackBuilder::RematchByDescriptors(int reference, TrackedFrame* frame) {
 
 int TrackBuilder::MatchOverlappingCameras(TrackedFrame* frame) {
   const auto start = std::chrono::steady_clock::now();
-  const int num_cameras = static_cast<int>(cameras_.size());
   int total = 0;
-  for (int a = 0; a < num_cameras; ++a)
-    for (int b = a + 1; b < num_cameras; ++b) {
-      if (ComputeViewOverlap(rig_, a, b, 16) < 0.05 && ComputeViewOverlap(rig_, b, a, 16) < 0.05)
+  for (const auto& [a, b] : overlapping_pairs_) {
+    const Camera& camera_a = rig_.cameras[a];
+    const Camera& camera_b = rig_.cameras[b];
+    // b_from_a, and the baseline: without one the pair sees no depth.
+    const Rigid3d b_from_a = camera_b.cam_from_rig * camera_a.cam_from_rig.Inverse();
+    const Eigen::Vector3d baseline = b_from_a.translation;  // centre of a, in b's frame
+    if (baseline.norm() < 1e-6) continue;
+    CameraState& state_a = cameras_[a];
+    CameraState& state_b = cameras_[b];
+    const std::vector<DescriptorMatch> matches =
+        MatchDescriptors(Describe(&state_a), Describe(&state_b), options_.descriptors);
+    std::unordered_set<int> tracks_b(state_b.tracks.begin(), state_b.tracks.end());
+    for (const DescriptorMatch& match : matches) {
+      Eigen::Vector3d bearing_a, bearing_b;
+      if (!camera_a.Unproject(
+              PreparedToInputPixel(state_a.corners[match.index1], options_.harris.downscale),
+              &bearing_a) ||
+          !camera_b.Unproject(
+              PreparedToInputPixel(state_b.corners[match.index2], options_.harris.downscale),
+              &bearing_b))
         continue;
-      const Camera& camera_a = rig_.cameras[a];
-      const Camera& camera_b = rig_.cameras[b];
-      // b_from_a, and the baseline: without one the pair sees no depth.
-      const Rigid3d b_from_a = camera_b.cam_from_rig * camera_a.cam_from_rig.Inverse();
-      const Eigen::Vector3d baseline = b_from_a.translation;  // centre of a, in b's frame
-      if (baseline.norm() < 1e-6) continue;
-      CameraState& state_a = cameras_[a];
-      CameraState& state_b = cameras_[b];
-      const std::vector<DescriptorMatch> matches =
-          MatchDescriptors(Describe(&state_a), Describe(&state_b), options_.descriptors);
-      std::unordered_set<int> tracks_b(state_b.tracks.begin(), state_b.tracks.end());
-      for (const DescriptorMatch& match : matches) {
-        Eigen::Vector3d bearing_a, bearing_b;
-        if (!camera_a.Unproject(
-                PreparedToInputPixel(state_a.corners[match.index1], options_.harris.downscale),
-                &bearing_a) ||
-            !camera_b.Unproject(
-                PreparedToInputPixel(state_b.corners[match.index2], options_.harris.downscale),
-                &bearing_b))
-          continue;
-        // In b's frame: ray a from the centre of a, ray b from the origin.
-        const Eigen::Vector3d direction_a = b_from_a.rotation * bearing_a;
-        const Eigen::Vector3d normal = baseline.cross(direction_a);
-        if (normal.norm() < 1e-9) continue;
-        const double epipolar =
-            std::asin(std::min(1.0, std::abs(normal.normalized().dot(bearing_b.normalized()))));
-        if (epipolar > options_.stereo_max_epipolar_angle) continue;
-        // Depths along both rays (closest points of the two lines) must be positive.
-        const Eigen::Vector3d w = baseline;  // from the origin of b to the centre of a
-        const double aa = direction_a.dot(direction_a), bb = bearing_b.dot(bearing_b),
-                     ab = direction_a.dot(bearing_b);
-        const double denominator = aa * bb - ab * ab;
-        if (denominator < 1e-12) continue;
-        const double depth_a = (ab * bearing_b.dot(w) - bb * direction_a.dot(w)) / denominator;
-        const double depth_b = (aa * bearing_b.dot(w) - ab * direction_a.dot(w)) / denominator;
-        if (!(depth_a > 0.0 && depth_b > 0.0)) continue;
-        const int track = state_a.tracks[match.index1];
-        if (tracks_b.count(track)) continue;  // b sees that track already
-        tracks_b.erase(state_b.tracks[match.index2]);
-        state_b.tracks[match.index2] = track;
-        tracks_b.insert(track);
-        ++total;
-      }
+      // In b's frame: ray a from the centre of a, ray b from the origin.
+      const Eigen::Vector3d direction_a = b_from_a.rotation * bearing_a;
+      const Eigen::Vector3d normal = baseline.cross(direction_a);
+      if (normal.norm() < 1e-9) continue;
+      const double epipolar =
+          std::asin(std::min(1.0, std::abs(normal.normalized().dot(bearing_b.normalized()))));
+      if (epipolar > options_.stereo_max_epipolar_angle) continue;
+      // Depths along both rays (closest points of the two lines) must be positive.
+      const Eigen::Vector3d w = baseline;  // from the origin of b to the centre of a
+      const double aa = direction_a.dot(direction_a), bb = bearing_b.dot(bearing_b),
+                   ab = direction_a.dot(bearing_b);
+      const double denominator = aa * bb - ab * ab;
+      if (denominator < 1e-12) continue;
+      const double depth_a = (ab * bearing_b.dot(w) - bb * direction_a.dot(w)) / denominator;
+      const double depth_b = (aa * bearing_b.dot(w) - ab * direction_a.dot(w)) / denominator;
+      if (!(depth_a > 0.0 && depth_b > 0.0)) continue;
+      const int track = state_a.tracks[match.index1];
+      if (tracks_b.count(track)) continue;  // b sees that track already
+      tracks_b.erase(state_b.tracks[match.index2]);
+      state_b.tracks[match.index2] = track;
+      tracks_b.insert(track);
+      ++total;
     }
+  }
   BuildObservations(frame);
   timings_.match += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return total;
@@ -352,10 +364,9 @@ void TrackBuilder::SetFrameResult(bool tracked, bool keyframe) {
   lost_ = !tracked;
   if (tracked && options_.rematch_keyframes > 0) last_tracked_ = {frame_index_, cameras_};
   if (!keyframe) return;
-  keyframe_cameras_ = cameras_;
-  if (options_.rematch_keyframes == 0) return;
+  // The last keyframe is always kept (the re-localisation's reference).
   keyframe_history_.insert(keyframe_history_.begin(), {frame_index_, cameras_});
-  if (static_cast<int>(keyframe_history_.size()) > options_.rematch_keyframes)
+  if (static_cast<int>(keyframe_history_.size()) > std::max(1, options_.rematch_keyframes))
     keyframe_history_.pop_back();
 }
 

@@ -128,12 +128,16 @@ class TrackBuilder {
   Rig rig_;
   TrackBuilderOptions options_;
   std::vector<CameraState> cameras_;
-  std::vector<CameraState> keyframe_cameras_;  // the last keyframe's, for re-localisation
-  // The last rematch_keyframes keyframes' states, newest first, and the last tracked frame's,
-  // with their frame indices.
+  // The last keyframes' states, newest first (at least the last one: the re-localisation's
+  // reference; rematch_keyframes of them), and the last tracked frame's, with their frame
+  // indices.
   std::vector<std::pair<int, std::vector<CameraState>>> keyframe_history_;
   std::pair<int, std::vector<CameraState>> last_tracked_{-1, {}};
   std::vector<CameraState>* RematchReference(int reference);
+  // Whether the last tracked frame is a reference of its own (not the last keyframe).
+  bool LastTrackedIsOwnReference() const;
+  // Camera pairs (a < b) whose views overlap (MatchOverlappingCameras).
+  std::vector<std::pair<int, int>> overlapping_pairs_;
   bool lost_ = false;
   int next_track_ = 0;
   int frame_index_ = -1;  // of the frame just added

@@ -157,6 +157,13 @@ struct Tracker::Impl {
   // dropped); in non-central mode its stereo tracks may give the map at once.
   FrameResult StartMap(const std::vector<TrackObservation>& observations);
   int TriangulateStereo();
+  // Forgets every map point (a new start, or stereo points too few for a map).
+  void ClearPoints() {
+    points.clear();
+    point_stamp.clear();
+    track_to_point.clear();
+    pending.clear();
+  }
   // Initialise or Track, and what follows from it (the motion model, the frames read while
   // initialising).
   FrameResult Process(const std::vector<TrackObservation>& observations,
@@ -723,10 +730,7 @@ FrameResult Tracker::Impl::StartMap(const std::vector<TrackObservation>& observa
     revised.push_back({keyframes[0].frame, dropped});
   }
   keyframes.clear();
-  points.clear();
-  point_stamp.clear();
-  track_to_point.clear();
-  pending.clear();
+  ClearPoints();
   init_frames.clear();
   last_tracked.clear();
   travelled = 0.0;
@@ -751,10 +755,7 @@ FrameResult Tracker::Impl::StartMap(const std::vector<TrackObservation>& observa
       result.inliers = stereo_points;
       result.status = "initialised from the rig's stereo baseline";
     } else {
-      points.clear();
-      point_stamp.clear();
-      track_to_point.clear();
-      pending.clear();
+      ClearPoints();
     }
   }
   if (result.tracked) RecordTracked(frame, result.world_from_rig);
@@ -854,6 +855,10 @@ int Tracker::NumKeyframes() const { return static_cast<int>(impl_->keyframes.siz
 int Tracker::NumPoints() const {
   return static_cast<int>(std::count_if(impl_->points.begin(), impl_->points.end(),
                                         [](const Impl::Point& p) { return p.alive; }));
+}
+
+Rigid3d Tracker::KeyframePose(int keyframe) const {
+  return impl_->keyframes.at(static_cast<size_t>(keyframe)).world_from_rig;
 }
 
 std::vector<Rigid3d> Tracker::KeyframePoses() const {

@@ -185,6 +185,7 @@ class Tracker {
   int NumPoints() const;
   // world_from_rig of each keyframe and the frame index it came from.
   std::vector<Rigid3d> KeyframePoses() const;
+  Rigid3d KeyframePose(int keyframe) const;  // one of them (0 <= keyframe < NumKeyframes())
   std::vector<int> KeyframeFrames() const;
 
   // ---- Map access and correction (loop closure) ----

@@ -26,6 +26,7 @@
 #include "apps/commands.h"
 #include "apps/output_folder.h"
 #include "apps/sfm_options.h"
+#include "apps/sfm_summary.h"
 #include "calib/atomic_file.h"
 #include "calib/drive.h"
 #include "calib/error.h"
@@ -205,20 +206,12 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
   else if (result.closed_mesh.triangles.empty())
     failure = "the surface is empty (" + sfm.outcome_reason + ")";
   const double frames_per_second = sfm.frames_total / std::max(result.seconds, 1e-9);
-  nlohmann::json summary = {
-      {"drive", drive.folder().string()},
+  // The SfM's part (as in sfm.json), the loop closures with the surface's replay of each.
+  nlohmann::json summary = SfmSummaryJson(drive, sfm, outputs, central, result.loop_replay_seconds,
+                                          result.loop_replay_keyframes);
+  const nlohmann::json surface_fields = {
       {"status", failure.empty() ? "usable" : "not_usable"},
-      {"sfm_outcome", SfmOutcomeName(sfm.outcome)},
       {"outcome", failure.empty() ? sfm.outcome_reason : failure},
-      {"mode", central ? "central" : "non-central"},
-      {"frames", sfm.frames_total},
-      {"frames_skipped", sfm.skipped.size()},
-      {"skipped", sfm.skipped},
-      {"warnings", WarningsLogged()},
-      {"frames_tracked", sfm.frames_tracked},
-      {"frames_not_tracked", stats.frames_not_tracked},
-      {"keyframes", sfm.keyframes.size()},
-      {"points", outputs.cloud.points.size()},
       {"triangles", result.mesh.triangles.size()},
       {"manifold", manifold.ok},
       {"boundary_loops", manifold.boundary_loops},
@@ -226,7 +219,6 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       {"closed_manifold", closed_manifold.ok},
       {"seconds", result.seconds},
       {"frames_per_second", frames_per_second},
-      {"sfm_seconds", sfm.seconds},
       {"surface_busy_seconds", result.surface_seconds},
       {"surface_ms_median", Quantile(surface_ms, 0.5)},
       {"surface_ms_p95", Quantile(surface_ms, 0.95)},
@@ -237,49 +229,16 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       {"queue_ms_median", Quantile(queue_ms, 0.5)},
       {"queue_ms_max",
        queue_ms.empty() ? 0.0 : *std::max_element(queue_ms.begin(), queue_ms.end())},
+      {"loop_closure", o.pipeline.sfm.loop_closure},
+      {"surface_replay_seconds", result.replay_seconds},
   };
-  nlohmann::json loops = nlohmann::json::array();
-  for (size_t i = 0; i < sfm.loop_closures.size(); ++i) {
-    const LoopClosureEvent& e = sfm.loop_closures[i].event;
-    loops.push_back(
-        {{"keyframe", e.keyframe},
-         {"frame", e.frame},
-         {"candidate_keyframe", e.candidate_keyframe},
-         {"candidate_frame", e.candidate_frame},
-         {"ring_shift", e.shift},
-         {"appearance_score", e.score},
-         {"matches", e.matches},
-         {"inliers", e.inliers},
-         {"relative_pose_matches", e.relative_matches},
-         {"relative_pose_inliers", e.relative_inliers},
-         {"rotation_disagreement_deg", e.rotation_disagreement * 180.0 / M_PI},
-         {"correction_translation", e.correction_translation},
-         {"correction_rotation_deg", sfm.loop_closures[i].correction_rotation_deg},
-         {"correction_scale", e.correction_scale},
-         {"ms", e.ms},
-         {"surface_replay_seconds",
-          i < result.loop_replay_seconds.size() ? result.loop_replay_seconds[i] : 0.0},
-         {"surface_replay_keyframes",
-          i < result.loop_replay_keyframes.size() ? result.loop_replay_keyframes[i] : 0}});
-  }
-  summary["colmap_images"] = stats.colmap.images;
-  summary["colmap_points"] = stats.colmap.points;
-  summary["colmap_mean_reprojection_error_px"] = stats.colmap.mean_reprojection_error;
-  summary["loop_closure"] = o.pipeline.sfm.loop_closure;
-  summary["loop_closures"] = loops;
-  summary["surface_replay_seconds"] = result.replay_seconds;
+  summary.update(surface_fields);
   // The final bundle adjustment's replay is the one after the loop closures' replays.
-  const bool final_ba =
-      sfm.final_bundle_adjustment_seconds > 0.0 && sfm.final_rms_angle_after > 0.0;
-  summary["final_bundle_adjustment"] = {
-      {"ran", final_ba},
-      {"seconds", sfm.final_bundle_adjustment_seconds},
-      {"rms_angle_before_deg", sfm.final_rms_angle_before * 180.0 / M_PI},
-      {"rms_angle_after_deg", sfm.final_rms_angle_after * 180.0 / M_PI},
-      {"surface_replay_seconds",
-       final_ba && result.loop_replay_seconds.size() > sfm.loop_closures.size()
-           ? result.loop_replay_seconds.back()
-           : 0.0}};
+  const bool final_ba = summary["final_bundle_adjustment"]["ran"].get<bool>();
+  summary["final_bundle_adjustment"]["surface_replay_seconds"] =
+      final_ba && result.loop_replay_seconds.size() > sfm.loop_closures.size()
+          ? result.loop_replay_seconds.back()
+          : 0.0;
   summary["loop_replay"] = o.loop_replay;
   summary["enclosing"] = o.enclosing;
   summary["prefetch_frames_ahead"] = o.pipeline.sfm.prefetch.frames_ahead;
@@ -289,7 +248,8 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
 
   std::string written;
   if (!result.closed_mesh.triangles.empty()) written += "surface.ply, surface_closed.ply, ";
-  if (sfm.outcome != SfmOutcome::kNotInitialised) written += "points.ply, poses.tum, frame_poses.tum, sparse/, ";
+  if (sfm.outcome != SfmOutcome::kNotInitialised)
+    written += "points.ply, poses.tum, frame_poses.tum, sparse/, ";
   written += std::string("stats/, ") + kSummaryFile;
   std::printf(
       "reconstruct: %zu frames (%zu skipped, %zu not tracked) in %.1f s (%.1f frames/s), %zu "

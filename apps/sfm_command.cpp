@@ -2,7 +2,8 @@
 // (pipeline/sfm_runner.h, the loop `reconstruct` runs too) on a drive's images, writing the
 // keyframe poses (poses.tum; every tracked frame in frame_poses.tum), the points (points.ply), a
 // COLMAP text model (sparse/), one row per frame (stats/sfm_frames.csv), the time per stage
-// (stats/sfm_stages.csv) and a summary (stats/sfm_summary.csv), by pipeline/sfm_outputs.h.
+// (stats/sfm_stages.csv) and a summary (stats/sfm_summary.csv), by pipeline/sfm_outputs.h, and
+// sfm.json: the run's outcome, skipped frames and warnings (apps/sfm_summary.h).
 
 #include <spdlog/spdlog.h>
 
@@ -10,11 +11,14 @@
 #include <chrono>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "apps/commands.h"
 #include "apps/output_folder.h"
 #include "apps/sfm_options.h"
+#include "apps/sfm_summary.h"
+#include "calib/atomic_file.h"
 #include "calib/drive.h"
 #include "calib/error.h"
 #include "pipeline/sfm_outputs.h"
@@ -64,6 +68,8 @@ void RunSfmCommand(SfmCommandOptions& o, const GlobalOptions& global) {
   SfmOutputOptions output_options;
   output_options.frame_rate = o.sfm.frame_rate;
   const SfmOutputs outputs = WriteSfmOutputs(drive, run, out, output_options);
+  const nlohmann::json summary = SfmSummaryJson(drive, run, outputs, o.sfm.sfm.tracker.central);
+  WriteTextFileAtomically(out / "sfm.json", summary.dump(2) + "\n");
   folder.Keep();
   const SfmStats& stats = outputs.stats;
   spdlog::info(

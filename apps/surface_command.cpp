@@ -1,7 +1,7 @@
 // `omnisculpt surface`: the incremental sculptor of surface/ fed by a simulated
 // perfect SfM on a drive's ground truth (--from-gt) or by a COLMAP model (--colmap), writing
-// surface.ply (the observed surface), surface_closed.ply (δO), points.ply and
-// stats/keyframes.csv.
+// surface.ply (the observed surface), surface_closed.ply (δO), points.ply,
+// stats/keyframes.csv and surface.json (the run's summary and warnings).
 
 #include <spdlog/spdlog.h>
 
@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <unordered_map>
@@ -133,7 +134,6 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   }
   WritePlyPoints(points, out / "points.ply");
   if (!keyframe_poses.empty()) WriteTum(keyframe_poses, out / "poses.tum");
-  folder.Keep();
 
   std::vector<double> ms;
   size_t max_e = 0, added = 0, rejected = 0;
@@ -175,6 +175,30 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       Quantile(ms, 0.95), ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()), max_e,
       (out / "surface.ply").c_str(), (out / "surface_closed.ply").c_str(),
       (out / "stats" / "keyframes.csv").c_str());
+  // The run's summary (docs/errors.md, rule 3: its warnings too), written last.
+  const nlohmann::json summary = {
+      {"input", o.colmap.empty() ? o.from_gt : o.colmap},
+      {"source", o.colmap.empty() ? "ground truth" : "colmap"},
+      {"status", closed.triangles.empty() ? "not_usable" : "usable"},
+      {"keyframes", stream.size()},
+      {"points_added", added},
+      {"points_rejected", rejected},
+      {"points_invalid", filtered[0]},
+      {"points_filtered_ground", filtered[1]},
+      {"points_filtered_length", filtered[2]},
+      {"points_filtered_aperture", filtered[3]},
+      {"triangles", mesh.triangles.size()},
+      {"manifold", report.ok},
+      {"boundary_loops", report.boundary_loops},
+      {"closed_triangles", closed.triangles.size()},
+      {"closed_manifold", closed_report.ok},
+      {"ms_median", Quantile(ms, 0.5)},
+      {"ms_p95", Quantile(ms, 0.95)},
+      {"max_cells_e", max_e},
+      {"warnings", WarningsLogged()},
+  };
+  WriteTextFileAtomically(out / "surface.json", summary.dump(2) + "\n");
+  folder.Keep();
   if (closed.triangles.empty()) {
     ReportNotUsable((o.colmap.empty() ? o.from_gt : o.colmap) + ": the surface is empty (" +
                     std::to_string(stream.size()) + " keyframes, " + std::to_string(added) +

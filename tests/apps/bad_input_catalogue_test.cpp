@@ -492,6 +492,39 @@ TEST_F(BadInputCatalogue, FrameMissingInOneCameraIsAWarningNamingIt) {
   EXPECT_NE(json["warnings"].dump().find("000007 (missing in cam2)"), std::string::npos) << json;
 }
 
+// `sfm` and `surface` keep their warnings in their JSON summaries too (sfm.json, surface.json).
+TEST_F(BadInputCatalogue, SkippedImageIsInSfmJsonAndWarningsOfSurfaceInSurfaceJson) {
+  const fs::path drive = CopyDrive();
+  const fs::path image = Image(drive, "cam1", 4);
+  WriteFile(image, "");
+  const fs::path sfm_out = scratch_ / "sfm_out";
+  const CommandResult sfm = Run({"--quiet", "sfm", drive.string(), "--out", sfm_out.string()});
+  EXPECT_NE(sfm.exit_code, 2) << sfm.err;
+  ASSERT_TRUE(fs::exists(sfm_out / "sfm.json")) << sfm.err;
+  const nlohmann::json sfm_json = nlohmann::json::parse(ReadTextFile(sfm_out / "sfm.json"));
+  EXPECT_EQ(sfm_json["frames_skipped"], 1) << sfm_json;
+  EXPECT_NE(sfm_json["skipped"].dump().find(image.filename().string()), std::string::npos);
+  EXPECT_NE(sfm_json["warnings"].dump().find(image.string()), std::string::npos) << sfm_json;
+  EXPECT_EQ(sfm_json["status"], sfm.exit_code == 0 ? "usable" : "not_usable") << sfm_json;
+
+  // A ground truth whose frames do not match the images: surface warns and says so in its JSON.
+  fs::remove(Image(drive, "cam0", 0));
+  for (const std::string camera : {"cam1", "cam2", "cam3", "cam4", "cam5"})
+    fs::remove(Image(drive, camera, 0));
+  const fs::path surface_out = scratch_ / "surface_out";
+  const CommandResult surface =
+      Run({"--quiet", "surface", "--from-gt", drive.string(), "--out", surface_out.string()});
+  ASSERT_TRUE(fs::exists(surface_out / "surface.json")) << surface.err;
+  const nlohmann::json surface_json =
+      nlohmann::json::parse(ReadTextFile(surface_out / "surface.json"));
+  EXPECT_EQ(surface_json["status"], surface.exit_code == 0 ? "usable" : "not_usable");
+  const std::vector<std::string> warnings = WarningLines(surface.err);
+  ASSERT_FALSE(warnings.empty()) << surface.err;
+  EXPECT_EQ(surface_json["warnings"].size(), warnings.size()) << surface_json;
+  EXPECT_NE(surface_json["warnings"].dump().find("ground-truth poses"), std::string::npos)
+      << surface_json;
+}
+
 TEST_F(BadInputCatalogue, ZeroByteImageMidDriveIsSkippedWithAWarning) {
   const fs::path drive = CopyDrive();
   WriteFile(Image(drive, "cam1", 4), "");

@@ -212,6 +212,8 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
       const int references = tracker.Initialised() ? s.builder.NumRematchReferences()
                                                    : std::min(1, s.builder.NumRematchReferences());
       for (int reference = 0; reference < references && !row.result.tracked; ++reference) {
+        // A frame that started the map (or became its keyframe) has nothing to retry.
+        if (!tracker.CanRetryFrame()) break;
         if (!s.builder.RematchByDescriptors(reference, &tracked)) break;
         const FrameResult retry =
             tracker.RetryFrame(tracked.observations, s.builder.MapPointSearcher());

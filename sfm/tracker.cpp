@@ -708,17 +708,21 @@ FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations,
   return s.Process(observations, search);
 }
 
+bool Tracker::CanRetryFrame() const {
+  const Impl& s = *impl_;
+  const int frame = s.num_frames - 1;
+  return !s.keyframes.empty() && s.keyframes.back().frame != frame &&
+         (s.last_tracked.empty() || s.last_tracked.back().frame != frame);
+}
+
 FrameResult Tracker::RetryFrame(const std::vector<TrackObservation>& observations,
                                 const MapPointSearchFn& search) {
-  Impl& s = *impl_;
-  const int frame = s.num_frames - 1;
-  FrameResult result;
-  if (s.keyframes.empty() || s.keyframes.back().frame == frame ||
-      (!s.last_tracked.empty() && s.last_tracked.back().frame == frame)) {
+  if (!CanRetryFrame()) {
+    FrameResult result;
     result.status = "no frame to retry";
     return result;
   }
-  return s.Process(observations, search);
+  return impl_->Process(observations, search);
 }
 
 FrameResult Tracker::Impl::StartMap(const std::vector<TrackObservation>& observations) {

@@ -151,6 +151,9 @@ class Tracker {
   // again, e.g. by descriptors against an older keyframe), after AddFrame did not track it.
   FrameResult RetryFrame(const std::vector<TrackObservation>& observations,
                          const MapPointSearchFn& search = {});
+  // Whether RetryFrame can take the last frame: false when it started the map or became a
+  // keyframe or was tracked (nothing to retry).
+  bool CanRetryFrame() const;
   // Whether a map exists (two keyframes, or one from the rig's own stereo baseline).
   bool Initialised() const;
   // Frames whose result changed after they were added: the frames read while initialising,

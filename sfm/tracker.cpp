@@ -73,8 +73,11 @@ struct Tracker::Impl {
   std::vector<Keyframe> keyframes;
   std::vector<Point> points;
   std::unordered_map<int, int> track_to_point;
-  std::vector<int> pending;      // live points not handed over yet (indices into points)
-  std::vector<int> point_stamp;  // the last frame that listed a point as a search candidate
+  std::vector<int> pending;  // live points not handed over yet (indices into points)
+  // The last search that listed a point as a candidate (a point is listed once per search even
+  // when several keyframes observe it; a frame may search more than once).
+  std::vector<int> point_stamp;
+  int searches = 0;
   std::vector<FinalizedKeyframe> finalized;
   // Motion model: the last two tracked frames (frame index, world_from_rig), and the distance
   // travelled over the tracked steps so far.
@@ -106,12 +109,30 @@ struct Tracker::Impl {
   // Constant velocity: the motion between the last two tracked frames (when consecutive)
   // applied once per frame from the last tracked one to `frame`; without a velocity, the last
   // tracked pose and false.
+  // The constant-velocity prediction of `frame`'s pose from the last two tracked frames. When
+  // frames between those two were not tracked (a gap), the step per frame is the g-th root of
+  // their relative motion (a constant screw motion: the rotation's angle over g, the
+  // translation solving sum_i R^i t = t_between), up to kMaxPredictionGap frames apart.
+  static constexpr int kMaxPredictionGap = 10;
   bool Predict(int frame, Rigid3d* world_from_rig) const {
     if (last_tracked.empty()) return false;
     const TrackedPose& last = last_tracked.back();
     *world_from_rig = last.world_from_rig;
-    if (last_tracked.size() < 2 || last_tracked[0].frame != last.frame - 1) return false;
-    const Rigid3d step = last_tracked[0].world_from_rig.Inverse() * last.world_from_rig;
+    if (last_tracked.size() < 2) return false;
+    const int gap = last.frame - last_tracked[0].frame;
+    if (gap < 1 || gap > kMaxPredictionGap) return false;
+    const Rigid3d between = last_tracked[0].world_from_rig.Inverse() * last.world_from_rig;
+    Rigid3d step = between;
+    if (gap > 1) {
+      step.rotation = Eigen::Quaterniond::Identity().slerp(1.0 / gap, between.rotation);
+      const Eigen::Matrix3d rotation = step.rotation.toRotationMatrix();
+      Eigen::Matrix3d power = Eigen::Matrix3d::Identity(), sum = Eigen::Matrix3d::Zero();
+      for (int i = 0; i < gap; ++i) {
+        sum += power;
+        power = rotation * power;
+      }
+      step.translation = sum.inverse() * between.translation;  // sum is invertible for gap>=1
+    }
     for (int f = last.frame; f < frame; ++f) *world_from_rig = *world_from_rig * step;
     return true;
   }
@@ -312,7 +333,7 @@ std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
   }
   const Rigid3d rig_from_world = world_from_rig.Inverse();
   const int num_keyframes = static_cast<int>(keyframes.size());
-  const int stamp = num_frames - 1;
+  const int stamp = searches++;
   std::vector<MapPointProjection> candidates;
   for (int k = std::max(0, num_keyframes - options.map_search_keyframes); k < num_keyframes; ++k)
     for (const TrackObservation& observation : keyframes[k].observations) {

@@ -34,6 +34,11 @@ std::string TrackerOptions::Check() const {
   if (!(stereo_min_ray_angle > 0.0))
     return "stereo_min_ray_angle: expected a positive angle (radians)";
   if (min_resection_inliers < 4) return "min_resection_inliers: expected at least 4";
+  if (min_consistent_inliers != 0 &&
+      (min_consistent_inliers < 6 || min_consistent_inliers > min_resection_inliers))
+    return "min_consistent_inliers: expected 0 or in [6, min_resection_inliers]";
+  if (!(consistent_inlier_share > 0.5 && consistent_inlier_share <= 1.0))
+    return "consistent_inlier_share: expected in (0.5, 1]";
   if (!(max_jump_ratio > 1.0)) return "max_jump_ratio: expected more than 1";
   if (map_search_keyframes < 1) return "map_search_keyframes: expected at least 1";
   if (max_handover_delay < 0) return "max_handover_delay: expected 0 or more keyframes";
@@ -399,7 +404,11 @@ Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservatio
     r.ransac = EstimateNoncentralAbsolutePose(rig, r.bearings, r.cameras, r.positions, absolute,
                                               &r.world_from_rig);
   }
-  r.ok = r.ransac.success && r.ransac.num_inliers >= options.min_resection_inliers;
+  const int inliers = r.ransac.num_inliers;
+  const bool consistent =
+      options.min_consistent_inliers > 0 && inliers >= options.min_consistent_inliers &&
+      inliers >= options.consistent_inlier_share * static_cast<double>(r.bearings.size());
+  r.ok = r.ransac.success && (inliers >= options.min_resection_inliers || consistent);
   AddSeconds(start, &timings.resect);
   return r;
 }

@@ -61,6 +61,11 @@ struct TrackerOptions {
   int min_stereo_points = 30;
   double stereo_min_ray_angle = 0.5 * M_PI / 180.0;
   int min_resection_inliers = 30;  // fewer: the frame is reported as not tracked
+  // ... unless at least min_consistent_inliers of them are at least consistent_inlier_share of
+  // the matches with a map point (few matches that nearly all agree: a narrow camera in a
+  // turn, a frame after a gap); 0: off.
+  int min_consistent_inliers = 15;
+  double consistent_inlier_share = 0.75;
   // Never a silently wrong map: a resected centre farther from the constant-velocity
   // prediction than max_jump_ratio times a step (the larger of the last step and the mean step
   // so far) times the frames since the last tracked one is rejected as a wrong pose.

@@ -14,11 +14,11 @@
 #include <string>
 #include <vector>
 
-#include "pipeline/colmap_keyframes.h"
 #include "calib/ply.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
 #include "eval/pose_eval.h"
+#include "pipeline/colmap_keyframes.h"
 #include "raycast/raycast.h"
 #include "tests/apps/point_colors_check.h"
 #include "tests/apps/run_omnisculpt.h"
@@ -191,6 +191,30 @@ TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
       {"sfm", (dir_->path() / "no_such_drive").string(), "--out", (dir_->path() / "y").string()});
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_EQ(testing::SplitText(missing.err).size(), 1u) << missing.err;
+}
+
+// One phone-like pinhole camera (the pinhole rig preset, 1024x768, 65 degrees across) on the
+// short drive's path through its first turn (70 frames, 54 m): the few matches that nearly all
+// agree in the turn are enough, so every frame is posed, within 1 % of the distance driven.
+TEST(SfmCommand, PinholePresetPosesEveryFrameThroughTheFirstTurn) {
+  const testing::TempDir dir("sfm_pinhole_test");
+  const fs::path drive = dir.path() / "drive", out = dir.path() / "out";
+  ASSERT_EQ(testing::RunOmnisculpt({"--quiet", "synth", "--preset", "short", "--rig-preset",
+                                    "pinhole", "--out", drive.string()},
+                                   dir.path())
+                .exit_code,
+            0);
+  const testing::CommandResult result = testing::RunOmnisculpt(
+      {"--quiet", "sfm", drive.string(), "--max-frames", "70", "--out", out.string()}, dir.path());
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  const std::vector<StampedPose> gt = ReadTum(drive / "gt" / "poses.tum");
+  const std::vector<StampedPose> posed = ReadTum(out / "frame_poses.tum");
+  EXPECT_EQ(posed.size(), 70u) << result.err;
+  const PoseEvalResult eval = EvaluatePoses(posed, gt);
+  ASSERT_EQ(eval.matches.size(), posed.size());
+  EXPECT_GT(eval.gt_length, 40.0);
+  EXPECT_LT(eval.ate_translation.rmse, 0.01 * eval.gt_length)
+      << "ATE RMSE " << eval.ate_translation.rmse << " m over " << eval.gt_length << " m";
 }
 
 // A surround rig whose cameras are 1.5 m from their centre: central mode says in the log that

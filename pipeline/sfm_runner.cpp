@@ -134,6 +134,8 @@ struct SfmRunner::Impl {
       row->result = revision.result;
       // Frames resected in a new map: relative to its first keyframe.
       SetReference(&*row, row->result.tracked ? 0 : -1);
+      if (!row->result.tracked)
+        spdlog::warn("frame {}: not tracked ({})", row->name, row->result.status);
     }
   }
 
@@ -227,6 +229,9 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
     s.builder.SetFrameResult(row.result.tracked, row.result.keyframe);
     if (row.result.tracked) {
       s.SetReference(&row, s.tracker.NumKeyframes() - 1);  // the newest keyframe
+    } else if (!tracker.Initialised()) {
+      // Held until the map starts: resected then (a warning only if that fails, below).
+      spdlog::info("frame {}: not tracked yet ({})", name, row.result.status);
     } else {
       spdlog::warn("frame {}: not tracked ({}){}", name, row.result.status,
                    tracked.relocalising ? ", re-localising against the last keyframes" : "");

@@ -367,6 +367,10 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                    "Write OUT/snapshots/surface_<keyframe>.ply every K keyframes (0: none)")
       ->capture_default_str();
   command->add_option("--seed", o->gt.seed, "Seed of the point sampling")->capture_default_str();
+  command->add_flag(
+      "--frame-rays", o->gt.frame_rays,
+      "--from-gt: also the rays from every drive frame between a point's first keyframe and its "
+      "own that sees it (an SfM tracking it through every frame; not the SfM's contract today)");
   command->add_flag_callback(
       "--uniform-points", [o] { o->gt.corner_points = false; },
       "--from-gt: sample points in uniform directions, not at the Harris corners "

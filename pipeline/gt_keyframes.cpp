@@ -1,6 +1,7 @@
 #include "pipeline/gt_keyframes.h"
 
 #include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -43,6 +44,34 @@ void AddRays(const RayCaster& caster, const std::vector<Eigen::Vector3d>& centre
     const double hit = CastDistance(caster, centres[k], to / dist, dist * 1.01 + 1e-3);
     if (hit < dist * (1.0 - 1e-3) - 1e-3) continue;  // occluded
     point->rays.push_back({KeyframeId(static_cast<uint32_t>(k)), centres[k]});
+  }
+}
+
+// GtKeyframeOptions::frame_rays: the rays from the drive frames (centres of every frame;
+// keyframe_frames[t] the frame of keyframe t) strictly between a point's first observing
+// keyframe and the next keyframes up to its own, when they see it unoccluded.
+void AddFrameRays(const TriangleMesh& mesh, const std::vector<Eigen::Vector3d>& centres,
+                  const std::vector<size_t>& keyframe_frames, const GtKeyframeOptions& options,
+                  std::vector<SurfaceKeyframe>* stream) {
+  const RayCaster caster(mesh);
+  const double max_distance = options.max_distance_factor * options.keyframe_spacing;
+  for (size_t t = 0; t < stream->size(); ++t) {
+    std::vector<SurfacePoint>& points = (*stream)[t].points;
+    tbb::parallel_for(size_t{0}, points.size(), [&](size_t i) {
+      SurfacePoint& p = points[i];
+      uint32_t first = p.rays.empty() ? static_cast<uint32_t>(t) : p.rays.front().keyframe.value;
+      for (const SurfaceRay& ray : p.rays) first = std::min(first, ray.keyframe.value);
+      for (size_t k = first; k < t; ++k) {
+        for (size_t f = keyframe_frames[k] + 1; f < keyframe_frames[k + 1]; ++f) {
+          const Eigen::Vector3d to = p.position - centres[f];
+          const double dist = to.norm();
+          if (dist > max_distance || dist < 1e-6) continue;
+          const double hit = CastDistance(caster, centres[f], to / dist, dist * 1.01 + 1e-3);
+          if (hit < dist * (1.0 - 1e-3) - 1e-3) continue;  // occluded
+          p.rays.push_back({KeyframeId(static_cast<uint32_t>(k)), centres[f]});
+        }
+      }
+    });
   }
 }
 
@@ -290,6 +319,7 @@ std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
   } else {
     stream = MakeGtKeyframes(mesh, keyframe_centres, options);
   }
+  if (options.frame_rays) AddFrameRays(mesh, centres, frames, options, &stream);
   if (keyframe_poses) {
     keyframe_poses->clear();
     std::mt19937_64 rng(options.seed ^ 0x5851f42d4c957f2dull);

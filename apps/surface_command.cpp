@@ -367,6 +367,15 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                    "Write OUT/snapshots/surface_<keyframe>.ply every K keyframes (0: none)")
       ->capture_default_str();
   command->add_option("--seed", o->gt.seed, "Seed of the point sampling")->capture_default_str();
+  command
+      ->add_option("--sky-rays", o->gt.sky_rays_per_camera,
+                   "--from-gt: free rays from each keyframe along about this many pixels per "
+                   "camera that see nothing (the sky); they carve up to --free-ray-length · r")
+      ->capture_default_str();
+  command
+      ->add_option("--free-ray-length", o->sculptor.free_ray_length_factor,
+                   "Free rays (the sky) carve up to this times r (0: ignored)")
+      ->capture_default_str();
   command->add_flag(
       "--frame-rays", o->gt.frame_rays,
       "--from-gt: also the rays from every drive frame between a point's first keyframe and its "

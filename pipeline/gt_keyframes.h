@@ -60,6 +60,10 @@ struct GtKeyframeOptions {
   // centre, the keyframe the latest one at or before the frame). Not the SfM's contract today
   // (docs/design.md §7: keyframes' rays only): an experiment on the perfect SfM.
   bool frame_rays = false;
+  // LoadGtKeyframes: free rays (SurfaceKeyframe::free_rays) from each keyframe, in each camera
+  // along the pixels of a regular grid of about this many whose ray hits nothing (the sky), from
+  // the keyframe centre. 0: none (an SfM hands over none today).
+  int sky_rays_per_camera = 0;
 
   std::string Check() const;
 };

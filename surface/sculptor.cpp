@@ -61,6 +61,7 @@ std::string SculptorOptions::Check() const {
     return "enclosed_free_neighbours must be 0 (off), 2, 3 or 4";
   }
   if (enclosed_free_rounds < 1) return "enclosed_free_rounds must be >= 1";
+  if (!(free_ray_length_factor >= 0.0)) return "free_ray_length_factor must be >= 0";
   // The parts' Check() name their fields with the prefix already ("genus.max_group_cells").
   for (const std::string& problem : {genus.Check(), smoothing.Check(), observed.Check()}) {
     if (!problem.empty()) return problem;
@@ -944,6 +945,48 @@ struct IncrementalSculptor::Impl {
     return visited;
   }
 
+  // SurfaceKeyframe::free_rays: each walked from its origin up to free_ray_length_factor · r,
+  // incrementing the counters of the cells it crosses (as Trace).
+  void TraceFreeRays(const SurfaceKeyframe& kf, KeyframeStats& st) {
+    if (kf.free_rays.empty() || options.free_ray_length_factor == 0.0) return;
+    const double length = options.free_ray_length_factor * r;
+    std::vector<CellHandle> starts(kf.free_rays.size());
+    {
+      CellHandle hint = t.tri.locate(ToCgal(kf.centre));
+      for (size_t i = 0; i < kf.free_rays.size(); ++i) {
+        starts[i] = t.tri.locate(ToCgal(kf.free_rays[i].origin), hint);
+        hint = starts[i];
+      }
+    }
+    std::atomic<size_t> became_free{0}, visited{0};
+    const uint32_t date = stamp;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, kf.free_rays.size(), 64),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                        size_t local = 0, cells = 0;
+                        auto visit = [&](CellHandle c) {
+                          ++cells;
+                          __atomic_store_n(&c->info().ray_stamp, date, __ATOMIC_RELAXED);
+                          if (__atomic_fetch_add(&c->info().counter, 1u, __ATOMIC_RELAXED) == 0) {
+                            ++local;
+                          }
+                        };
+                        for (size_t i = range.begin(); i != range.end(); ++i) {
+                          const SurfaceFreeRay& ray = kf.free_rays[i];
+                          if (!ray.origin.allFinite() || !ray.direction.allFinite() ||
+                              !(ray.direction.norm() > 0.0))
+                            continue;
+                          t.WalkFromInside(ToCgal(ray.origin),
+                                           ToCgal(ray.origin + length * ray.direction.normalized()),
+                                           starts[i], 2.0, visit);
+                        }
+                        became_free += local;
+                        visited += cells;
+                      });
+    t.num_f += became_free;
+    st.rays_free += kf.free_rays.size();
+    st.free_ray_cells += visited;
+  }
+
   // Puts the rays of the keyframe's points (traced) in the ray grid.
   void RegisterRays(const KeyframeRecord& kf) {
     for (int i : kf.points) {
@@ -1293,6 +1336,7 @@ struct IncrementalSculptor::Impl {
     }
     st.rays_new = tasks.size();
     TraceRays(tasks, n_cells, rec, st);
+    TraceFreeRays(kf, st);
     keyframes.push_back(std::move(rec));
     st.ms_rays = MsSince(tick);
 
@@ -1376,6 +1420,7 @@ struct IncrementalSculptor::Impl {
     }
     st.rays_new = tasks.size();
     Trace(tasks, false);
+    for (const SurfaceKeyframe& kf : kfs) TraceFreeRays(kf, st);
     for (const KeyframeRecord& kf : keyframes) RegisterRays(kf);
     st.ms_rays = MsSince(tick);
     tick = Clock::now();

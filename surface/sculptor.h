@@ -29,11 +29,20 @@ struct SurfacePoint {
   std::vector<SurfaceRay> rays;
 };
 
-// The only sfm→surface contract (docs/design.md §7): the points P_t of keyframe t.
+// A direction in which keyframe t's image sees no structure (the sky): from an optical centre,
+// unit direction. Carves the cells it crosses up to SculptorOptions::free_ray_length_factor · r.
+struct SurfaceFreeRay {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
+};
+
+// The only sfm→surface contract (docs/design.md §7): the points P_t of keyframe t and the
+// directions that see nothing (none from the SfM today).
 struct SurfaceKeyframe {
   KeyframeId id;
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // c_t
   std::vector<SurfacePoint> points;
+  std::vector<SurfaceFreeRay> free_rays;
 };
 
 // The enclosing set E of paper §4.1, which O is shrunk out of before the new points go in.
@@ -198,6 +207,10 @@ struct SculptorOptions {
   // errors above 1 m in front of the ground truth, 2 carves into the walls (docs/figures.md F14).
   int enclosed_free_neighbours = 3;
   int enclosed_free_rounds = 1;  // repeated on the neighbours of the cells that joined F
+  // The keyframes' free rays (SurfaceFreeRay) carve the cells they cross from their origin up to
+  // this times r, once, when their keyframe is sculpted (they are not re-traced over later new
+  // cells). 0: ignored.
+  double free_ray_length_factor = 1.0;
 
   std::string Check() const;
 };
@@ -265,6 +278,9 @@ struct KeyframeStats {
   // SculptorOptions::enclosed_free_neighbours: cells that joined F without a ray.
   size_t cells_enclosed_free = 0;
   double ms_enclosed_free = 0;  // their search, inside ms_grow
+  // SurfaceKeyframe::free_rays traced, and the cells they crossed (inside ms_rays). Not in the
+  // CSV row.
+  size_t rays_free = 0, free_ray_cells = 0;
 };
 
 // Colours the vertices of a mesh of the sculptor (vertex_points from ExtractMesh or

@@ -1,6 +1,6 @@
 // GtKeyframeOptions::frame_rays on the short drive: the same points as without, each with its
 // keyframes' rays and more, from the drive frames between its keyframes, each of which sees its
-// point unoccluded.
+// point unoccluded; sky_rays_per_camera: free rays that see nothing.
 
 #include <gtest/gtest.h>
 
@@ -72,6 +72,40 @@ TEST(GtFrameRaysShortDrive, EveryTrackedFrameAddsARayToThePointsItSees) {
     }
   }
   EXPECT_GT(extra, before / 2) << before << " keyframe rays, " << after << " with the frames'";
+}
+
+// GtKeyframeOptions::sky_rays_per_camera: the free rays are the grid pixels that see nothing.
+TEST(GtSkyRaysShortDrive, FreeRaysAreTheDirectionsThatSeeNoTriangle) {
+  std::string error;
+  const std::filesystem::path drive = testing::ShortDrive(&error);
+  ASSERT_FALSE(drive.empty()) << error;
+  GtKeyframeOptions options;
+  options.max_keyframes = 4;
+  TriangleMesh mesh;
+  EXPECT_TRUE(LoadGtKeyframes(drive, options).front().free_rays.empty());
+  options.sky_rays_per_camera = 200;
+  const std::vector<SurfaceKeyframe> stream = LoadGtKeyframes(drive, options, &mesh);
+  const RayCaster caster(mesh);
+  const Rig rig = ReadRigJson(drive / "rig.json");
+  for (const SurfaceKeyframe& kf : stream) {
+    // The upper camera sees mostly sky, the side ones some: between a sixth of the grid and
+    // all of it.
+    EXPECT_GT(kf.free_rays.size(), 200u);
+    EXPECT_LT(kf.free_rays.size(), 200u * rig.NumCameras() * 11 / 10);
+    size_t hit = 0, up = 0;
+    for (const SurfaceFreeRay& ray : kf.free_rays) {
+      EXPECT_EQ(ray.origin, kf.centre);
+      EXPECT_NEAR(ray.direction.norm(), 1.0, 1e-9);
+      Ray cast;
+      cast.origin = ray.origin;
+      cast.direction = ray.direction;
+      hit += std::isfinite(caster.Cast(cast).distance) ? 1 : 0;
+      up += ray.direction.z() > 0.0 ? 1 : 0;
+    }
+    // Cast from the keyframe centre, not the camera's (a few centimetres away): a graze may hit.
+    EXPECT_LT(hit, kf.free_rays.size() / 50 + 1);
+    EXPECT_EQ(up, kf.free_rays.size());
+  }
 }
 
 }  // namespace

@@ -419,6 +419,46 @@ TEST(IncrementalSculptor, PointsFarBelowTheMeasuredGroundAreFiltered) {
   EXPECT_EQ(ground, 8u);
 }
 
+// Free rays (the sky) carve the cells they cross: more of F, O still bounded by a closed
+// 2-manifold; ignored with free_ray_length_factor 0.
+TEST(IncrementalSculptor, FreeRaysCarveTheCellsTheyCross) {
+  std::vector<SurfaceKeyframe> stream = StreetStream(12);
+  size_t free_rays = 0;
+  for (SurfaceKeyframe& kf : stream) {
+    for (int i = 0; i < 40; ++i) {  // a fan upwards across the street, over the facades
+      const double a = -1.2 + 2.4 * i / 39.0;
+      kf.free_rays.push_back(
+          {kf.centre, Eigen::Vector3d(0.2 * std::sin(3.0 * a), std::sin(a), std::cos(a))});
+      ++free_rays;
+    }
+  }
+  auto sculpt = [&](double length, size_t* traced, size_t* cells) {
+    SculptorOptions options;
+    options.init_keyframes = 6;  // a batch of 6, then 6 one by one
+    options.free_ray_length_factor = length;
+    IncrementalSculptor sculptor(options);
+    *traced = *cells = 0;
+    size_t cells_f = 0;
+    for (const KeyframeStats& st : Sculpt(sculptor, stream)) {
+      *traced += st.rays_free;
+      *cells += st.free_ray_cells;
+      cells_f = st.cells_f;
+    }
+    EXPECT_EQ(sculptor.CheckInvariants(), "") << "length " << length;
+    const MeshCheckReport report = CheckMesh(sculptor.ExtractMesh());
+    EXPECT_TRUE(report.ok) << "length " << length << ": " << report.Summary();
+    return cells_f;
+  };
+  size_t traced = 0, cells = 0;
+  const size_t without = sculpt(0.0, &traced, &cells);
+  EXPECT_EQ(traced, 0u);
+  EXPECT_EQ(cells, 0u);
+  const size_t with = sculpt(1.0, &traced, &cells);
+  EXPECT_EQ(traced, free_rays);
+  EXPECT_GT(cells, free_rays);
+  EXPECT_GT(with, without);
+}
+
 TEST(SculptorOptions, CheckRejectsBadValues) {
   SculptorOptions o;
   EXPECT_EQ(o.Check(), "");

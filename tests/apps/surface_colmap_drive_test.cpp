@@ -92,12 +92,14 @@ struct Sculpted {
 
 // Reads the model, sculpts it with the up direction from its cameras and scores surface.ply
 // (moved back by old_from_new) against the ground truth.
+// keep_up: the ground filter's up stays options.up (the world's z, as before the up direction
+// was found from the cameras).
 Sculpted SculptModel(const fs::path& model, const Sim3d& old_from_new, const Rig& rig,
                      const std::vector<KeyframePoses>& keyframes, const RayCaster& gt_caster,
-                     SculptorOptions options) {
+                     SculptorOptions options, bool keep_up = false) {
   Sculpted out;
   const std::vector<SurfaceKeyframe> stream = LoadColmapKeyframes(model, nullptr, &out.up);
-  options.up = out.up;
+  if (!keep_up) options.up = out.up;
   IncrementalSculptor sculptor(options);
   auto count = [&out](const std::vector<KeyframeStats>& rows) {
     for (const KeyframeStats& row : rows) {
@@ -171,7 +173,15 @@ TEST(SurfaceColmapShortDrive, AModelMovedByASimilaritySculptsTheSameSurface) {
       SculptModel(dir / "as_is", Sim3d(), d.rig, d.keyframes, gt_caster, options);
   const Sculpted after =
       SculptModel(dir / "moved", moved.Inverse(), d.rig, d.keyframes, gt_caster, options);
+  // As before: the world's z as up, the ground 3 s below the keyframes.
+  SculptorOptions before = options;
+  before.reach_quantile = 0.0;
+  before.ground_quantile = 0.0;
+  const Sculpted z_up =
+      SculptModel(dir / "moved", moved.Inverse(), d.rig, d.keyframes, gt_caster, before, true);
   fs::remove_all(dir);
+  // With the world's z as up in the moved world, the ground filter drops points at random.
+  EXPECT_GT(z_up.below_ground, as_is.below_ground + as_is.points_in / 20);
 
   // The up direction found from the cameras is the drive's z, moved.
   EXPECT_GT(as_is.up.dot(Eigen::Vector3d::UnitZ()), std::cos(2.0 * M_PI / 180.0)) << as_is.up;

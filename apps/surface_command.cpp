@@ -66,11 +66,18 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   std::vector<StampedPose> keyframe_poses;  // known for --from-gt only
   std::vector<size_t> keyframe_frames;      // known for --from-gt only
   std::unordered_map<PointId, Rgb8> point_colors;
+  Eigen::Vector3d colmap_up = Eigen::Vector3d::UnitZ();
   const std::vector<SurfaceKeyframe> stream =
       o.colmap.empty()
           ? LoadGtKeyframes(o.from_gt, o.gt, nullptr, &keyframe_poses, &keyframe_frames)
-          : LoadColmapKeyframes(o.colmap, &point_colors);
+          : LoadColmapKeyframes(o.colmap, &point_colors, &colmap_up);
   if (o.colmap.empty()) point_colors = GtPointColors(o.from_gt, stream, keyframe_frames);
+  // A COLMAP world has no up axis: the ground filter's up from its cameras.
+  if (!o.colmap.empty()) {
+    o.sculptor.up = colmap_up;
+    spdlog::info("surface: up direction from the model's cameras ({:.3f}, {:.3f}, {:.3f})",
+                 colmap_up.x(), colmap_up.y(), colmap_up.z());
+  }
   const double gen_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   size_t num_points = 0;
@@ -151,9 +158,10 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     filtered[3] += st.points_filtered_aperture;
   }
   std::printf(
-      "surface: points filtered (paper §5.1): %zu invalid, %zu below the ground, %zu too far, "
-      "%zu narrow aperture\n",
-      filtered[0], filtered[1], filtered[2], filtered[3]);
+      "surface: s = %.3f (keyframe spacing %.3f), r = %.2f, ground bound %.2f; points filtered "
+      "(paper §5.1): %zu invalid, %zu below the ground, %zu too far, %zu narrow aperture\n",
+      sculptor.scale(), sculptor.keyframe_spacing(), sculptor.ray_length_bound(),
+      sculptor.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3]);
   const MeshCheckReport closed_report = CheckMesh(closed);
   MeshCheckOptions bounded;
   bounded.allow_boundary = true;
@@ -261,6 +269,19 @@ void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOpti
 
 void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
   command
+      ->add_option("--reach-quantile", sculptor->reach_quantile,
+                   "s is at least the first keyframes' points' distance to their keyframe at "
+                   "this quantile (those with a wide aperture) over the ray-length factor 15, so "
+                   "that r follows the points' reach and not only the keyframe spacing (0: s is "
+                   "the keyframe spacing, the paper)")
+      ->capture_default_str();
+  command
+      ->add_option("--ground-quantile", sculptor->ground_quantile,
+                   "The ground filter drops points more than max(3 s, g + s) below their "
+                   "keyframe, g the depth of the ground: the first keyframes' points' height at "
+                   "this quantile (0: 3 s, the paper)")
+      ->capture_default_str();
+  command
       ->add_option("--enclosed-free", sculptor->enclosed_free_neighbours,
                    "A cell that no ray crossed with this many of its 4 neighbours crossed joins "
                    "the free space before the growth (0: off; 2, 3 or 4)")
@@ -349,6 +370,10 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   command->add_option("--points-per-keyframe", o->gt.points_per_keyframe, "New points per keyframe")
       ->capture_default_str();
+  command
+      ->add_option("--max-point-distance-factor", o->gt.max_distance_factor,
+                   "--from-gt: largest point–keyframe distance, in units of --keyframe-spacing")
+      ->capture_default_str();
   command->add_option("--max-keyframes", o->gt.max_keyframes, "0: the whole drive")
       ->capture_default_str();
   command->add_option("--point-noise", o->gt.point_noise, "Gaussian noise on points, metres")
@@ -366,6 +391,19 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                    "Write OUT/snapshots/surface_<keyframe>.ply every K keyframes (0: none)")
       ->capture_default_str();
   command->add_option("--seed", o->gt.seed, "Seed of the point sampling")->capture_default_str();
+  command
+      ->add_option("--sky-rays", o->gt.sky_rays_per_camera,
+                   "--from-gt: free rays from each keyframe along about this many pixels per "
+                   "camera that see nothing (the sky); they carve up to --free-ray-length · r")
+      ->capture_default_str();
+  command
+      ->add_option("--free-ray-length", o->sculptor.free_ray_length_factor,
+                   "Free rays (the sky) carve up to this times r (0: ignored)")
+      ->capture_default_str();
+  command->add_flag(
+      "--frame-rays", o->gt.frame_rays,
+      "--from-gt: also the rays from every drive frame between a point's first keyframe and its "
+      "own that sees it (an SfM tracking it through every frame; not the SfM's contract today)");
   command->add_flag_callback(
       "--uniform-points", [o] { o->gt.corner_points = false; },
       "--from-gt: sample points in uniform directions, not at the Harris corners "

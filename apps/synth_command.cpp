@@ -29,6 +29,7 @@ struct SynthCommandOptions {
   int frame_step = 1;
   double exposure_spread = 0;
   double exposure_offset = 0;
+  bool colour = false;
   std::string out;
   bool force = false;
   bool list_presets = false;
@@ -72,6 +73,7 @@ void RunSynth(const SynthCommandOptions& command, const GlobalOptions& global) {
   if (command.exposure_offset < 0 || command.exposure_offset > 64)
     throw InputError("", "--exposure-offset", "must be in [0, 64] grey levels");
   options.render.exposure_offset = command.exposure_offset;
+  options.render.colour = command.colour;
   const Rig rig = !command.rig_path.empty()     ? ReadRigJson(command.rig_path)
                   : !command.rig_preset.empty() ? synth::RigPresetRig(command.rig_preset)
                                                 : DefaultRig();
@@ -127,6 +129,9 @@ void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global) {
       ->add_option("--exposure-offset", command->exposure_offset,
                    "Per-camera exposure offset drawn in [-O, O] grey levels from the seed")
       ->capture_default_str();
+  synth->add_flag("--colour", command->colour,
+                  "Colour images: each building's walls, doors and trim tinted by a colour from "
+                  "the seed (roads, glass, roofs and the sky stay grey)");
   synth->add_option("--out", command->out, "Output drive folder");
   synth->add_flag("--force", command->force,
                   "Replace an earlier drive in --out (one with gt/scene.json), at the end only");

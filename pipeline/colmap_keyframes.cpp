@@ -15,6 +15,7 @@
 #include "calib/error.h"
 #include "calib/input_file.h"
 #include "calib/number_text.h"
+#include "pipeline/world_up.h"
 
 namespace omni {
 namespace {
@@ -88,13 +89,15 @@ class LineReader {
 
 struct Image {
   Eigen::Vector3d centre;
-  std::string frame;  // the file name without its folder
+  Eigen::Vector3d up;  // the image's up axis (−y of the camera) in the world
+  std::string frame;   // the file name without its folder
 };
 
 }  // namespace
 
 std::vector<SurfaceKeyframe> LoadColmapKeyframes(const std::filesystem::path& model,
-                                                 std::unordered_map<PointId, Rgb8>* point_colors) {
+                                                 std::unordered_map<PointId, Rgb8>* point_colors,
+                                                 Eigen::Vector3d* world_up) {
   if (!std::filesystem::exists(model / "cameras.txt")) {
     throw InputError(model / "cameras.txt", "", "cannot open (a COLMAP text model is expected)");
   }
@@ -102,12 +105,13 @@ std::vector<SurfaceKeyframe> LoadColmapKeyframes(const std::filesystem::path& mo
   text.cameras = ReadInputFile(model / "cameras.txt");
   text.images = ReadInputFile(model / "images.txt");
   text.points3d = ReadInputFile(model / "points3D.txt");
-  return ParseColmapKeyframes(text, model, point_colors);
+  return ParseColmapKeyframes(text, model, point_colors, world_up);
 }
 
 std::vector<SurfaceKeyframe> ParseColmapKeyframes(const ColmapTextModel& text,
                                                   const std::filesystem::path& model,
-                                                  std::unordered_map<PointId, Rgb8>* point_colors) {
+                                                  std::unordered_map<PointId, Rgb8>* point_colors,
+                                                  Eigen::Vector3d* world_up) {
   // Cameras: CAMERA_ID MODEL WIDTH HEIGHT PARAMS[].
   const std::filesystem::path cameras_path = model / "cameras.txt";
   std::unordered_set<uint32_t> camera_ids;
@@ -165,9 +169,18 @@ std::vector<SurfaceKeyframe> ParseColmapKeyframes(const ColmapTextModel& text,
     const Eigen::Matrix3d r = cam_from_world_q.normalized().toRotationMatrix();
     Image image;
     image.centre = -r.transpose() * translation;
+    image.up = -r.row(1).transpose();
     image.frame = std::filesystem::path(in.Token(9)).filename().string();
     if (!images.emplace(id, image).second) in.Fail("repeated IMAGE_ID " + in.Token(0));
     frames[image.frame].push_back(id);
+  }
+  if (world_up) {
+    std::vector<Eigen::Vector3d> centres, ups;
+    for (const auto& [id, image] : images) {
+      centres.push_back(image.centre);
+      ups.push_back(image.up);
+    }
+    *world_up = EstimateWorldUp(centres, ups);
   }
   // Keyframes by frame name; the centre is the mean of the camera centres.
   std::vector<SurfaceKeyframe> keyframes;

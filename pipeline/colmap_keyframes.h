@@ -20,9 +20,11 @@ namespace omni {
 // not an unsigned 32-bit integer or is repeated, a quaternion not of unit norm (within 1e-3), an
 // image whose camera is not in cameras.txt or without its line of 2D points, a track naming an
 // unknown image. point_colors, when given, receives the R G B of
-// each point of points3D.txt.
+// each point of points3D.txt; world_up, the model's up direction from its cameras
+// (EstimateWorldUp of pipeline/world_up.h over the images' centres and up axes).
 std::vector<SurfaceKeyframe> LoadColmapKeyframes(
-    const std::filesystem::path& model, std::unordered_map<PointId, Rgb8>* point_colors = nullptr);
+    const std::filesystem::path& model, std::unordered_map<PointId, Rgb8>* point_colors = nullptr,
+    Eigen::Vector3d* world_up = nullptr);
 
 // The three files' text, for ParseColmapKeyframes.
 struct ColmapTextModel {
@@ -33,6 +35,6 @@ struct ColmapTextModel {
 // LoadColmapKeyframes on text in memory; `model` names the folder in the errors.
 std::vector<SurfaceKeyframe> ParseColmapKeyframes(
     const ColmapTextModel& text, const std::filesystem::path& model,
-    std::unordered_map<PointId, Rgb8>* point_colors = nullptr);
+    std::unordered_map<PointId, Rgb8>* point_colors = nullptr, Eigen::Vector3d* world_up = nullptr);
 
 }  // namespace omni

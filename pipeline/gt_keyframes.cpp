@@ -1,6 +1,7 @@
 #include "pipeline/gt_keyframes.h"
 
 #include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -44,6 +45,60 @@ void AddRays(const RayCaster& caster, const std::vector<Eigen::Vector3d>& centre
     if (hit < dist * (1.0 - 1e-3) - 1e-3) continue;  // occluded
     point->rays.push_back({KeyframeId(static_cast<uint32_t>(k)), centres[k]});
   }
+}
+
+// GtKeyframeOptions::frame_rays: the rays from the drive frames (centres of every frame;
+// keyframe_frames[t] the frame of keyframe t) strictly between a point's first observing
+// keyframe and the next keyframes up to its own, when they see it unoccluded.
+void AddFrameRays(const TriangleMesh& mesh, const std::vector<Eigen::Vector3d>& centres,
+                  const std::vector<size_t>& keyframe_frames, const GtKeyframeOptions& options,
+                  std::vector<SurfaceKeyframe>* stream) {
+  const RayCaster caster(mesh);
+  const double max_distance = options.max_distance_factor * options.keyframe_spacing;
+  for (size_t t = 0; t < stream->size(); ++t) {
+    std::vector<SurfacePoint>& points = (*stream)[t].points;
+    tbb::parallel_for(size_t{0}, points.size(), [&](size_t i) {
+      SurfacePoint& p = points[i];
+      uint32_t first = p.rays.empty() ? static_cast<uint32_t>(t) : p.rays.front().keyframe.value;
+      for (const SurfaceRay& ray : p.rays) first = std::min(first, ray.keyframe.value);
+      for (size_t k = first; k < t; ++k) {
+        for (size_t f = keyframe_frames[k] + 1; f < keyframe_frames[k + 1]; ++f) {
+          const Eigen::Vector3d to = p.position - centres[f];
+          const double dist = to.norm();
+          if (dist > max_distance || dist < 1e-6) continue;
+          const double hit = CastDistance(caster, centres[f], to / dist, dist * 1.01 + 1e-3);
+          if (hit < dist * (1.0 - 1e-3) - 1e-3) continue;  // occluded
+          p.rays.push_back({KeyframeId(static_cast<uint32_t>(k)), centres[f]});
+        }
+      }
+    });
+  }
+}
+
+// GtKeyframeOptions::sky_rays_per_camera: the free rays of each keyframe, from its centre along
+// the pixels of a grid of about `per_camera` pixels in each camera whose ray hits no triangle.
+void AddSkyRays(const TriangleMesh& mesh, const Rig& rig,
+                const std::vector<Rigid3d>& world_from_rig, int per_camera,
+                std::vector<SurfaceKeyframe>* stream) {
+  const RayCaster caster(mesh);
+  tbb::parallel_for(size_t{0}, stream->size(), [&](size_t t) {
+    SurfaceKeyframe& kf = (*stream)[t];
+    for (const Camera& camera : rig.cameras) {
+      const double step = std::sqrt(static_cast<double>(camera.width) * camera.height / per_camera);
+      const Rigid3d world_from_cam = world_from_rig[t] * camera.cam_from_rig.Inverse();
+      for (double y = 0.5 * step; y < camera.height; y += step) {
+        for (double x = 0.5 * step; x < camera.width; x += step) {
+          Eigen::Vector3d bearing;
+          if (!camera.Unproject(Eigen::Vector2d(x - 0.5, y - 0.5), &bearing)) continue;
+          const Eigen::Vector3d direction = (world_from_cam.rotation * bearing).normalized();
+          if (std::isfinite(CastDistance(caster, world_from_cam.translation, direction,
+                                         std::numeric_limits<double>::infinity())))
+            continue;  // it sees structure
+          kf.free_rays.push_back({kf.centre, direction});
+        }
+      }
+    }
+  });
 }
 
 // Pose noise of the simulated SfM (own seeded stream, so the points sampled do not change).
@@ -158,6 +213,7 @@ std::string GtKeyframeOptions::Check() const {
   if (max_keyframes < 0) return "max_keyframes must be >= 0";
   if (const std::string problem = harris.Check(); !problem.empty()) return "harris." + problem;
   if (!(corner_merge_distance > 0)) return "corner_merge_distance must be > 0";
+  if (sky_rays_per_camera < 0) return "sky_rays_per_camera must be >= 0";
   return "";
 }
 
@@ -289,6 +345,13 @@ std::vector<SurfaceKeyframe> LoadGtKeyframes(const std::filesystem::path& drive,
         options);
   } else {
     stream = MakeGtKeyframes(mesh, keyframe_centres, options);
+  }
+  if (options.frame_rays) AddFrameRays(mesh, centres, frames, options, &stream);
+  if (options.sky_rays_per_camera > 0) {
+    std::vector<Rigid3d> keyframe_world_from_rig;
+    for (size_t t = 0; t < stream.size(); ++t)
+      keyframe_world_from_rig.push_back(poses[frames[t]].world_from_rig);
+    AddSkyRays(mesh, rig, keyframe_world_from_rig, options.sky_rays_per_camera, &stream);
   }
   if (keyframe_poses) {
     keyframe_poses->clear();

@@ -54,6 +54,16 @@ struct GtKeyframeOptions {
   // or an earlier one) is that point seen again, as an SfM track would be, not a new point
   // (metres).
   double corner_merge_distance = 0.05;
+  // LoadGtKeyframes: besides the keyframes' rays, a ray from every drive frame between a point's
+  // first observing keyframe and its own that sees it unoccluded within the distance bound, as
+  // an SfM that tracks the point through every frame would have them (origin the frame's
+  // centre, the keyframe the latest one at or before the frame). Not the SfM's contract today
+  // (docs/design.md §7: keyframes' rays only): an experiment on the perfect SfM.
+  bool frame_rays = false;
+  // LoadGtKeyframes: free rays (SurfaceKeyframe::free_rays) from each keyframe, in each camera
+  // along the pixels of a regular grid of about this many whose ray hits nothing (the sky), from
+  // the keyframe centre. 0: none (an SfM hands over none today).
+  int sky_rays_per_camera = 0;
 
   std::string Check() const;
 };

@@ -8,6 +8,7 @@
 #include <tbb/task_group.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -35,6 +36,11 @@ std::string SculptorOptions::Check() const {
   if (!(steiner_step_factor > 0.0)) return "steiner_step_factor must be > 0";
   if (!(max_ray_length_factor > 0.0)) return "max_ray_length_factor must be > 0";
   if (!(below_ground_factor >= 0.0)) return "below_ground_factor must be >= 0";
+  if (!(reach_quantile >= 0.0 && reach_quantile <= 1.0)) return "reach_quantile must be in [0, 1]";
+  if (!(ground_quantile >= 0.0 && ground_quantile <= 1.0)) {
+    return "ground_quantile must be in [0, 1]";
+  }
+  if (!(ground_margin_factor >= 0.0)) return "ground_margin_factor must be >= 0";
   if (!(min_aperture_deg >= 0.0 && min_aperture_deg < 180.0)) {
     return "min_aperture_deg must be in [0, 180)";
   }
@@ -55,6 +61,7 @@ std::string SculptorOptions::Check() const {
     return "enclosed_free_neighbours must be 0 (off), 2, 3 or 4";
   }
   if (enclosed_free_rounds < 1) return "enclosed_free_rounds must be >= 1";
+  if (!(free_ray_length_factor >= 0.0)) return "free_ray_length_factor must be >= 0";
   // The parts' Check() name their fields with the prefix already ("genus.max_group_cells").
   for (const std::string& problem : {genus.Check(), smoothing.Check(), observed.Check()}) {
     if (!problem.empty()) return problem;
@@ -189,6 +196,8 @@ struct IncrementalSculptor::Impl {
   DelaunayMesh::Impl& t;  // T and O bookkeeping
   std::vector<SurfaceKeyframe> buffered;
   double s = 0.0;           // scale of §5.1
+  double spacing = 0.0;     // mean keyframe spacing of the first keyframes (s measured)
+  double ground = 0.0;      // b of the ground filter
   double step = 0.0;        // Steiner grid step
   double r = 0.0, l = 0.0;  // §3.3 bounds
   Eigen::Vector3d grid_origin = Eigen::Vector3d::Zero();
@@ -322,7 +331,16 @@ struct IncrementalSculptor::Impl {
       double sum = 0.0;
       for (size_t i = 1; i < first.size(); ++i)
         sum += (first[i].centre - first[i - 1].centre).norm();
-      s = first.size() > 1 ? sum / static_cast<double>(first.size() - 1) : 0.0;
+      spacing = first.size() > 1 ? sum / static_cast<double>(first.size() - 1) : 0.0;
+      s = spacing;
+      const double reach = MeasuredReach(first);
+      if (spacing > 0.0 && reach > options.max_ray_length_factor * spacing) {
+        s = reach / options.max_ray_length_factor;
+        spdlog::info(
+            "surface: s = {:.3f} from the points' reach {:.2f} (keyframe spacing {:.3f}; "
+            "r = {:.1f} s)",
+            s, reach, spacing, options.max_ray_length_factor);
+      }
     }
     if (!(s > 0.0)) {
       spdlog::warn("surface: keyframe centres do not move (s = 0); nothing to sculpt");
@@ -332,31 +350,86 @@ struct IncrementalSculptor::Impl {
     ray_grid = internal::RayGrid(options.ray_grid_step_factor * s);
     l = step * std::sqrt(3.0);
     r = options.max_ray_length_factor * s;
+    ground = options.below_ground_factor * s;
+    const double depth = MeasuredGroundDepth(first);
+    if (depth + options.ground_margin_factor * s > ground) {
+      ground = depth + options.ground_margin_factor * s;
+      spdlog::info(
+          "surface: the ground {:.2f} under the keyframes: points more than {:.2f} below "
+          "them are filtered out ({:.1f} s)",
+          depth, ground, ground / s);
+    }
     // Shift the grid off round coordinates so that grid planes do not contain the (often
     // axis-aligned) points and centres of synthetic scenes.
     grid_origin = first.front().centre + step * Eigen::Vector3d(0.3183, 0.2718, 0.1414);
   }
 
+  // Two rays of p more than min_aperture_deg apart (the aperture filter of §5.1).
+  bool WideAperture(const SurfacePoint& p) const {
+    const double cos_min = std::cos(options.min_aperture_deg * M_PI / 180.0);
+    for (size_t i = 0; i < p.rays.size(); ++i) {
+      const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
+      for (size_t j = i + 1; j < p.rays.size(); ++j) {
+        const Eigen::Vector3d b = (p.rays[j].origin - p.position).normalized();
+        if (a.dot(b) < cos_min) return true;
+      }
+    }
+    return false;
+  }
+
+  // SculptorOptions::reach_quantile: the distance of the first keyframes' points with a wide
+  // aperture to their keyframe centre, at that quantile (0 when off or without such a point).
+  double MeasuredReach(const std::vector<SurfaceKeyframe>& first) const {
+    if (options.reach_quantile == 0.0 || !options.filter_points) return 0.0;
+    std::vector<double> distances;
+    for (const SurfaceKeyframe& kf : first) {
+      for (const SurfacePoint& p : kf.points) {
+        if (p.position.allFinite() && WideAperture(p)) {
+          distances.push_back((p.position - kf.centre).norm());
+        }
+      }
+    }
+    if (distances.empty()) return 0.0;
+    const size_t k = std::min(
+        distances.size() - 1,
+        static_cast<size_t>(options.reach_quantile * static_cast<double>(distances.size())));
+    std::nth_element(distances.begin(), distances.begin() + static_cast<long>(k), distances.end());
+    return distances[k];
+  }
+
+  // SculptorOptions::ground_quantile: g, the depth of the ground under the first keyframes'
+  // centres (0 when off, without a point with a wide aperture or when that height is not below).
+  double MeasuredGroundDepth(const std::vector<SurfaceKeyframe>& first) const {
+    if (options.ground_quantile == 0.0 || !options.filter_points) return 0.0;
+    const Eigen::Vector3d up = options.up.normalized();
+    std::vector<double> heights;
+    for (const SurfaceKeyframe& kf : first) {
+      for (const SurfacePoint& p : kf.points) {
+        if (p.position.allFinite() && WideAperture(p)) {
+          heights.push_back((p.position - kf.centre).dot(up));
+        }
+      }
+    }
+    if (heights.empty()) return 0.0;
+    const size_t k = std::min(
+        heights.size() - 1,
+        static_cast<size_t>(options.ground_quantile * static_cast<double>(heights.size())));
+    std::nth_element(heights.begin(), heights.begin() + static_cast<long>(k), heights.end());
+    return std::max(0.0, -heights[k]);
+  }
+
   // The §5.1 filters; returns the points kept.
   std::vector<const SurfacePoint*> Filter(const SurfaceKeyframe& kf, KeyframeStats& st) const {
     std::vector<const SurfacePoint*> kept;
-    const double cos_min = std::cos(options.min_aperture_deg * M_PI / 180.0);
     const Eigen::Vector3d up = options.up.normalized();
     // Each point is counted by the first filter that removes it.
     auto removed_by = [&](const SurfacePoint& p) -> size_t* {
       if (!p.position.allFinite() || p.rays.empty()) return &st.points_invalid;
       if (!options.filter_points) return nullptr;
       const Eigen::Vector3d d = p.position - kf.centre;
-      if (d.dot(up) < -options.below_ground_factor * s) return &st.points_filtered_ground;
+      if (d.dot(up) < -ground) return &st.points_filtered_ground;
       if (d.norm() > r) return &st.points_filtered_length;
-      for (size_t i = 0; i < p.rays.size(); ++i) {
-        const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
-        for (size_t j = i + 1; j < p.rays.size(); ++j) {
-          const Eigen::Vector3d b = (p.rays[j].origin - p.position).normalized();
-          if (a.dot(b) < cos_min) return nullptr;
-        }
-      }
-      return &st.points_filtered_aperture;
+      return WideAperture(p) ? nullptr : &st.points_filtered_aperture;
     };
     for (const SurfacePoint& p : kf.points) {
       if (size_t* count = removed_by(p)) {
@@ -872,6 +945,48 @@ struct IncrementalSculptor::Impl {
     return visited;
   }
 
+  // SurfaceKeyframe::free_rays: each walked from its origin up to free_ray_length_factor · r,
+  // incrementing the counters of the cells it crosses (as Trace).
+  void TraceFreeRays(const SurfaceKeyframe& kf, KeyframeStats& st) {
+    if (kf.free_rays.empty() || options.free_ray_length_factor == 0.0) return;
+    const double length = options.free_ray_length_factor * r;
+    std::vector<CellHandle> starts(kf.free_rays.size());
+    {
+      CellHandle hint = t.tri.locate(ToCgal(kf.centre));
+      for (size_t i = 0; i < kf.free_rays.size(); ++i) {
+        starts[i] = t.tri.locate(ToCgal(kf.free_rays[i].origin), hint);
+        hint = starts[i];
+      }
+    }
+    std::atomic<size_t> became_free{0}, visited{0};
+    const uint32_t date = stamp;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, kf.free_rays.size(), 64),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                        size_t local = 0, cells = 0;
+                        auto visit = [&](CellHandle c) {
+                          ++cells;
+                          __atomic_store_n(&c->info().ray_stamp, date, __ATOMIC_RELAXED);
+                          if (__atomic_fetch_add(&c->info().counter, 1u, __ATOMIC_RELAXED) == 0) {
+                            ++local;
+                          }
+                        };
+                        for (size_t i = range.begin(); i != range.end(); ++i) {
+                          const SurfaceFreeRay& ray = kf.free_rays[i];
+                          if (!ray.origin.allFinite() || !ray.direction.allFinite() ||
+                              !(ray.direction.norm() > 0.0))
+                            continue;
+                          t.WalkFromInside(ToCgal(ray.origin),
+                                           ToCgal(ray.origin + length * ray.direction.normalized()),
+                                           starts[i], 2.0, visit);
+                        }
+                        became_free += local;
+                        visited += cells;
+                      });
+    t.num_f += became_free;
+    st.rays_free += kf.free_rays.size();
+    st.free_ray_cells += visited;
+  }
+
   // Puts the rays of the keyframe's points (traced) in the ray grid.
   void RegisterRays(const KeyframeRecord& kf) {
     for (int i : kf.points) {
@@ -1221,6 +1336,7 @@ struct IncrementalSculptor::Impl {
     }
     st.rays_new = tasks.size();
     TraceRays(tasks, n_cells, rec, st);
+    TraceFreeRays(kf, st);
     keyframes.push_back(std::move(rec));
     st.ms_rays = MsSince(tick);
 
@@ -1304,6 +1420,7 @@ struct IncrementalSculptor::Impl {
     }
     st.rays_new = tasks.size();
     Trace(tasks, false);
+    for (const SurfaceKeyframe& kf : kfs) TraceFreeRays(kf, st);
     for (const KeyframeRecord& kf : keyframes) RegisterRays(kf);
     st.ms_rays = MsSince(tick);
     tick = Clock::now();
@@ -1439,6 +1556,9 @@ Eigen::Vector3d IncrementalSculptor::SurfacePosition(int vertex) const {
 }
 const DelaunayMesh& IncrementalSculptor::triangulation() const { return impl_->mesh; }
 double IncrementalSculptor::scale() const { return impl_->s; }
+double IncrementalSculptor::keyframe_spacing() const { return impl_->spacing; }
+double IncrementalSculptor::ray_length_bound() const { return impl_->r; }
+double IncrementalSculptor::ground_bound() const { return impl_->ground; }
 size_t IncrementalSculptor::NumProcessedKeyframes() const { return impl_->keyframes.size(); }
 
 std::string IncrementalSculptor::CheckInvariants(bool check_triangulation) const {

@@ -29,11 +29,20 @@ struct SurfacePoint {
   std::vector<SurfaceRay> rays;
 };
 
-// The only sfm→surface contract (docs/design.md §7): the points P_t of keyframe t.
+// A direction in which keyframe t's image sees no structure (the sky): from an optical centre,
+// unit direction. Carves the cells it crosses up to SculptorOptions::free_ray_length_factor · r.
+struct SurfaceFreeRay {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
+};
+
+// The only sfm→surface contract (docs/design.md §7): the points P_t of keyframe t and the
+// directions that see nothing (none from the SfM today).
 struct SurfaceKeyframe {
   KeyframeId id;
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // c_t
   std::vector<SurfacePoint> points;
+  std::vector<SurfaceFreeRay> free_rays;
 };
 
 // The enclosing set E of paper §4.1, which O is shrunk out of before the new points go in.
@@ -109,9 +118,19 @@ enum class EnclosingWidening {
 };
 
 struct SculptorOptions {
-  // s, the mean distance between consecutive keyframe centres; 0: measured on the first
-  // init_keyframes keyframes (paper §5.1).
+  // s, the unit of the bounds below (paper §5.1: the mean distance between consecutive keyframe
+  // centres); 0: measured on the first init_keyframes keyframes, as that mean distance or, when
+  // larger, reach_quantile's reach over max_ray_length_factor.
   double scale = 0.0;
+  // The measured s is at least the reach of the first keyframes' points over
+  // max_ray_length_factor: their distance to their keyframe centre at this quantile, over the
+  // points that pass the aperture filter (their triangulation angle, i.e. their depth against
+  // the baseline of the cameras that see them, makes them certain enough). So the bounds r, l,
+  // the ground and the Steiner step follow where the points are, not the keyframe spacing
+  // alone: with keyframes denser than the points' depth asks for (a COLMAP model of every
+  // frame, 0.4 m apart), r = 15 s would drop most points as too far. Scale-free, so it holds in
+  // any world frame. 0: off (the paper, s the keyframe spacing).
+  double reach_quantile = 0.97;
   // Step of the Steiner grid in units of s (paper §5.1: 15 s). The tetrahedra diameter bound
   // l of §3.3 is the voxel diagonal.
   double steiner_step_factor = 15.0;
@@ -120,9 +139,18 @@ struct SculptorOptions {
   double max_ray_length_factor = 15.0;
   // Point filters of §5.1.
   bool filter_points = true;
-  double below_ground_factor = 3.0;  // reject (p − c_t)·up < −3 s
-  double min_aperture_deg = 10.0;    // keep points with two rays forming more than 10°
-  Eigen::Vector3d up = Eigen::Vector3d::UnitZ();  // the vertical direction v of §5.1
+  // Reject (p − c_t)·up < −b, b = max(below_ground_factor · s, g + ground_margin_factor · s)
+  // with g the depth of the ground under the keyframe centres, measured on the first keyframes'
+  // points with a wide aperture: minus their height (p − c_t)·up at ground_quantile (0: no g,
+  // the paper's −3 s alone). The paper's 3 s assumes cameras about that high; a rig 4 m above
+  // the ground with keyframes 0.7 m apart would otherwise lose the whole ground.
+  double below_ground_factor = 3.0;
+  double ground_quantile = 0.05;
+  double ground_margin_factor = 1.0;
+  double min_aperture_deg = 10.0;  // keep points with two rays forming more than 10°
+  // The vertical direction v of §5.1, in the world frame of the keyframes (z for the drives of
+  // synth/; pipeline/world_up.h estimates it for a world frame without an up axis).
+  Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
   // The first init_keyframes keyframes measure s; with batch_init they are sculpted at once
   // (paper §5.1: T_40, F_40, O_40), otherwise one by one like the others.
   int init_keyframes = 40;
@@ -179,6 +207,10 @@ struct SculptorOptions {
   // errors above 1 m in front of the ground truth, 2 carves into the walls (docs/figures.md F14).
   int enclosed_free_neighbours = 3;
   int enclosed_free_rounds = 1;  // repeated on the neighbours of the cells that joined F
+  // The keyframes' free rays (SurfaceFreeRay) carve the cells they cross from their origin up to
+  // this times r, once, when their keyframe is sculpted (they are not re-traced over later new
+  // cells). 0: ignored.
+  double free_ray_length_factor = 1.0;
 
   std::string Check() const;
 };
@@ -246,6 +278,9 @@ struct KeyframeStats {
   // SculptorOptions::enclosed_free_neighbours: cells that joined F without a ray.
   size_t cells_enclosed_free = 0;
   double ms_enclosed_free = 0;  // their search, inside ms_grow
+  // SurfaceKeyframe::free_rays traced, and the cells they crossed (inside ms_rays). Not in the
+  // CSV row.
+  size_t rays_free = 0, free_ray_cells = 0;
 };
 
 // Colours the vertices of a mesh of the sculptor (vertex_points from ExtractMesh or
@@ -282,6 +317,11 @@ class IncrementalSculptor {
   Eigen::Vector3d SurfacePosition(int vertex) const;
   const DelaunayMesh& triangulation() const;
   double scale() const;  // s, 0 until known
+  // The mean distance between the first keyframes' centres, which s is measured from (0 until
+  // known, or when s was given).
+  double keyframe_spacing() const;
+  double ray_length_bound() const;  // r of §3.3 (max_ray_length_factor · s), 0 until known
+  double ground_bound() const;      // b of the ground filter (SculptorOptions), 0 until known
   size_t NumProcessedKeyframes() const;
 
   // Invariants for tests and debugging: O ⊆ F, no infinite cell in O, the incremental counts

@@ -192,13 +192,13 @@ std::string SceneJson(const SyntheticDrive& drive) {
                 {"poles", drive.scene.num_poles},
                 {"trees", drive.scene.num_trees},
                 {"parked_cars", drive.scene.num_cars}};
-  j["files"] = {{"images", "images/<camera>/<frame>.png, 8-bit grey, frames 000000..."},
+  const std::string pixels = r.colour ? "8-bit colour" : "8-bit grey";
+  j["files"] = {{"images", "images/<camera>/<frame>.png, " + pixels + ", frames 000000..."},
                 {"poses", "gt/poses.tum: world_from_rig, timestamp = frame / frame_rate"},
                 {"mesh", "gt/mesh.ply: every rendered triangle, metres, facing free space"}};
   if (stepped) {
-    j["files"]["images"] =
-        "images/<camera>/<frame>.png, 8-bit grey, one trajectory frame in frame_step, named by "
-        "its trajectory index";
+    j["files"]["images"] = "images/<camera>/<frame>.png, " + pixels +
+                           ", one trajectory frame in frame_step, named by its trajectory index";
     j["files"]["poses"] =
         "gt/poses.tum: world_from_rig of the frames written, timestamp = "
         "trajectory index / frame_rate";

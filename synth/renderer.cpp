@@ -150,6 +150,20 @@ SceneRenderer::SceneRenderer(const CityScene& scene, uint64_t seed,
 
 SceneRenderer::~SceneRenderer() = default;
 
+Eigen::Vector3d SceneRenderer::Tint(uint32_t key) const {
+  if (!impl_->options.colour || key == kSky) return Eigen::Vector3d::Ones();
+  const auto surface = static_cast<Surface>(key % 16u);
+  if (surface != Surface::kWall && surface != Surface::kDoor && surface != Surface::kTrim &&
+      surface != Surface::kReveal) {
+    return Eigen::Vector3d::Ones();
+  }
+  // A saturated colour per building: each channel in [0.35, 1], one of them 1.
+  const uint64_t h = Hash(impl_->seed, 0xC0102u, key / 16u);
+  Eigen::Vector3d tint(0.35 + 0.65 * Uniform(h), 0.35 + 0.65 * Uniform(Mix64(h)),
+                       0.35 + 0.65 * Uniform(Mix64(Mix64(h))));
+  return tint / tint.maxCoeff();
+}
+
 std::optional<SurfaceHit> SceneRenderer::CastRay(const Eigen::Vector3d& origin,
                                                  const Eigen::Vector3d& direction) const {
   const Eigen::Vector3d unit = direction.normalized();
@@ -238,7 +252,7 @@ cv::Mat SceneRenderer::Render(const Camera& camera, const Rigid3d& world_from_ca
       rays += static_cast<uint64_t>(r.size()) * width;
     });
   }
-  cv::Mat image(height, width, CV_8UC1);
+  cv::Mat image(height, width, options.colour ? CV_8UC3 : CV_8UC1);
   const double sigma = options.noise_sigma;
   tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& r) {
     uint64_t local_rays = 0;
@@ -262,8 +276,16 @@ cv::Mat SceneRenderer::Render(const Camera& camera, const Rigid3d& world_from_ca
           local_rays += n * n;
         }
         const double noise = sigma > 0 ? sigma * Gaussian(Hash(image_seed, 0x401CE, i)) : 0.0;
-        const double level = std::round(255.0 * gain * v + offset + noise);
-        row[x] = static_cast<uint8_t>(std::min(255.0, std::max(0.0, level)));
+        auto quantise = [&](double value) {
+          const double level = std::round(255.0 * gain * value + offset + noise);
+          return static_cast<uint8_t>(std::min(255.0, std::max(0.0, level)));
+        };
+        if (options.colour) {
+          const Eigen::Vector3d tint = Tint(c.key);
+          for (int k = 0; k < 3; ++k) row[3 * x + k] = quantise(v * tint[2 - k]);  // BGR
+        } else {
+          row[x] = quantise(v);
+        }
       }
     }
     rays += local_rays;

@@ -40,11 +40,16 @@ class SceneRenderer {
   std::optional<SurfaceHit> CastPixel(const Camera& camera, const Rigid3d& world_from_cam,
                                       const Eigen::Vector2d& pixel) const;
 
-  // An 8-bit grey image (CV_8UC1, camera.height x camera.width). `image_seed` drives the
+  // An 8-bit grey image (CV_8UC1, camera.height x camera.width), or with options.colour an 8-bit
+  // BGR image (CV_8UC3, OpenCV's channel order). `image_seed` drives the
   // supersampling jitter and the sensor noise; `gain` multiplies the exposure and `offset` (grey
   // levels) is added to it, before the noise and the quantisation. Uses every core.
   cv::Mat Render(const Camera& camera, const Rigid3d& world_from_cam, uint64_t image_seed,
                  double gain, double offset = 0.0) const;
+
+  // The tint of options.colour for a Sample key (object * 16 + surface), red green blue in
+  // (0, 1]; (1, 1, 1) for the surfaces that stay grey, the sky and without options.colour.
+  Eigen::Vector3d Tint(uint32_t key) const;
 
   // Rays cast by Render since construction.
   uint64_t RaysCast() const { return rays_.load(); }

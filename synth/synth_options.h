@@ -88,8 +88,13 @@ struct SynthRenderOptions {
   double exposure_spread = 0.0;
   double exposure_offset = 0.0;  // 8-bit grey levels
   double noise_sigma = 1.5;      // sensor noise, 8-bit grey levels
-  int png_compression = 1;       // 0..9, cv::IMWRITE_PNG_COMPRESSION
-  double image_scale = 1.0;      // scales each camera's size and intrinsics (tests)
+  // Colour images (8-bit BGR PNGs): the walls, doors and trim of each building tinted by a
+  // colour drawn from the seed and the building (its shaded albedo times the tint, channel by
+  // channel, one sensor noise for the three); road, sidewalk, glass, roofs and the sky stay grey.
+  // false: grey images (the default, as the drives have always been).
+  bool colour = false;
+  int png_compression = 1;   // 0..9, cv::IMWRITE_PNG_COMPRESSION
+  double image_scale = 1.0;  // scales each camera's size and intrinsics (tests)
 
   std::string Check() const;
 };

@@ -172,6 +172,13 @@ struct DelaunayMesh::Impl {
   template <typename Visit>
   void WalkFrom(const internal::Point& from, const internal::Point& target,
                 internal::CellHandle start, int entry, double stop, Visit&& visit) const;
+  // The walk of the segment from→target from the finite cell `start` that contains `from`
+  // (strictly inside, or on its border), as Walk: visits start, then the cells the segment
+  // crosses. Returns without a visit when the segment leaves start through no facet cleanly
+  // (it runs along a facet or an edge from the start). Thread-safe like Walk.
+  template <typename Visit>
+  void WalkFromInside(const internal::Point& from, const internal::Point& target,
+                      internal::CellHandle start, double stop, Visit&& visit) const;
   // The facet of finite cell c through which the segment from→target enters c, when it does so
   // without degeneracy: `from` strictly beyond the facet's plane, `target` strictly inside and
   // the line through the open triangle. -1 otherwise (then use Walk). Exact predicates.
@@ -280,6 +287,42 @@ void DelaunayMesh::Impl::WalkFrom(const internal::Point& from, const internal::P
                                   internal::CellHandle start, int entry, double stop,
                                   Visit&& visit) const {
   WalkLoop(from, target, start, entry, /*first=*/false, stop, visit);
+}
+
+template <typename Visit>
+void DelaunayMesh::Impl::WalkFromInside(const internal::Point& from, const internal::Point& target,
+                                        internal::CellHandle start, double stop,
+                                        Visit&& visit) const {
+  if (tri.is_infinite(start) || from == target) return;
+  std::array<const internal::Point*, 4> v = {&start->vertex(0)->point(), &start->vertex(1)->point(),
+                                             &start->vertex(2)->point(),
+                                             &start->vertex(3)->point()};
+  // The exit facet: target strictly beyond its plane and the line crossing the open triangle.
+  int exit = -1;
+  bool inside = true;
+  for (int k = 0; k < 4 && exit < 0; ++k) {
+    std::array<const internal::Point*, 4> q = v;
+    q[k] = &target;
+    if (CGAL::orientation(*q[0], *q[1], *q[2], *q[3]) != CGAL::NEGATIVE) continue;
+    inside = false;
+    const int a = (k + 1) & 3, b = (k + 2) & 3, d = (k + 3) & 3;
+    const auto o1 = CGAL::orientation(from, target, *v[a], *v[b]);
+    const auto o2 = CGAL::orientation(from, target, *v[b], *v[d]);
+    const auto o3 = CGAL::orientation(from, target, *v[d], *v[a]);
+    if (o1 != CGAL::ZERO && o1 == o2 && o2 == o3) exit = k;
+  }
+  if (inside) {  // the whole segment in start
+    visit(start);
+    return;
+  }
+  if (exit < 0) return;
+  if constexpr (std::is_same_v<decltype(visit(start)), bool>) {
+    if (!visit(start)) return;
+  } else {
+    visit(start);
+  }
+  const internal::CellHandle next = start->neighbor(exit);
+  WalkLoop(from, target, next, next->index(start), /*first=*/false, stop, visit);
 }
 
 template <typename Visit>

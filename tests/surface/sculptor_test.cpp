@@ -296,6 +296,7 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
 TEST(IncrementalSculptor, PointFiltersOfSection51) {
   SculptorOptions options;
   options.scale = 1.0;
+  options.ground_quantile = 0.0;  // the paper's ground bound, 3 s
   IncrementalSculptor sculptor(options);
   SurfaceKeyframe kf;
   kf.id = KeyframeId(0);
@@ -323,6 +324,139 @@ TEST(IncrementalSculptor, PointFiltersOfSection51) {
   EXPECT_EQ(stats[0].points_invalid, 0u);
   EXPECT_EQ(stats[0].points_added, 2u);
   EXPECT_EQ(sculptor.CheckInvariants(), "");
+}
+
+// Keyframes 0.5 m apart along x, 4 m above a ground; points on the ground and on two facades
+// 10 m to each side, within 8 m along x, seen from origins 3 m apart.
+std::vector<SurfaceKeyframe> StreetStream(int keyframes, std::vector<double> extra_heights = {}) {
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<SurfaceKeyframe> stream;
+  uint32_t id = 0;
+  for (int t = 0; t < keyframes; ++t) {
+    SurfaceKeyframe kf;
+    kf.id = KeyframeId(t);
+    kf.centre = Eigen::Vector3d(0.5 * t, 0, 4);
+    auto add = [&](const Eigen::Vector3d& p) {
+      SurfacePoint sp;
+      sp.id = PointId(id++);
+      sp.position = p;
+      sp.rays = {{kf.id, kf.centre - Eigen::Vector3d(1.5, 0, 0)},
+                 {kf.id, kf.centre + Eigen::Vector3d(1.5, 0, 0)}};
+      kf.points.push_back(sp);
+    };
+    for (int i = 0; i < 60; ++i) {
+      const double x = kf.centre.x() - 8.0 + 16.0 * u(rng);
+      const double side = i % 2 == 0 ? -10.0 : 10.0;
+      if (i % 3 == 0) {
+        add({x, side * u(rng), 0.0});  // the ground
+      } else {
+        add({x, side, 8.0 * u(rng)});  // a facade
+      }
+    }
+    for (double h : extra_heights) add({kf.centre.x(), 3.0, h});
+    stream.push_back(kf);
+  }
+  return stream;
+}
+
+// The stats of every keyframe of the stream.
+std::vector<KeyframeStats> Sculpt(IncrementalSculptor& sculptor,
+                                  const std::vector<SurfaceKeyframe>& stream) {
+  std::vector<KeyframeStats> all;
+  for (const SurfaceKeyframe& kf : stream) {
+    for (const KeyframeStats& st : sculptor.AddKeyframe(kf)) all.push_back(st);
+  }
+  for (const KeyframeStats& st : sculptor.Finish()) all.push_back(st);
+  return all;
+}
+
+TEST(IncrementalSculptor, TheScaleFollowsThePointsReachAndTheGroundItsDepth) {
+  const std::vector<SurfaceKeyframe> stream = StreetStream(8);
+  SculptorOptions paper;
+  paper.init_keyframes = 8;
+  paper.reach_quantile = 0.0;
+  paper.ground_quantile = 0.0;
+  IncrementalSculptor spacing(paper);
+  size_t paper_far = 0, paper_ground = 0;
+  for (const KeyframeStats& st : Sculpt(spacing, stream)) {
+    paper_far += st.points_filtered_length;
+    paper_ground += st.points_filtered_ground;
+  }
+  EXPECT_NEAR(spacing.scale(), 0.5, 1e-12);  // the keyframe spacing: r = 7.5 m, ground 1.5 m
+  EXPECT_GT(paper_far, 100u);
+  EXPECT_GT(paper_ground, 100u);
+
+  SculptorOptions measured = paper;
+  measured.reach_quantile = SculptorOptions().reach_quantile;
+  measured.ground_quantile = SculptorOptions().ground_quantile;
+  IncrementalSculptor reach(measured);
+  size_t far = 0, ground = 0;
+  for (const KeyframeStats& st : Sculpt(reach, stream)) {
+    far += st.points_filtered_length;
+    ground += st.points_filtered_ground;
+  }
+  EXPECT_NEAR(reach.keyframe_spacing(), 0.5, 1e-12);
+  // The farthest points are 13.4 m away (8 m along, 10 m across, 4 m down or up): s about
+  // 13 / 15.
+  EXPECT_GT(reach.scale(), 0.75);
+  EXPECT_LT(reach.scale(), 0.9);
+  EXPECT_NEAR(reach.ray_length_bound(), 15.0 * reach.scale(), 1e-9);
+  EXPECT_LT(far, paper_far / 10);
+  EXPECT_EQ(ground, 0u);
+  // The ground 4 m down, plus s.
+  EXPECT_NEAR(reach.ground_bound(), 4.0 + reach.scale(), 0.05);
+}
+
+TEST(IncrementalSculptor, PointsFarBelowTheMeasuredGroundAreFiltered) {
+  // One point per keyframe 0.5 m below the ground (kept) and one 3 m below it (filtered).
+  const std::vector<SurfaceKeyframe> stream = StreetStream(8, {-0.5, -3.0});
+  SculptorOptions options;
+  options.init_keyframes = 8;
+  IncrementalSculptor sculptor(options);
+  size_t ground = 0;
+  for (const KeyframeStats& st : Sculpt(sculptor, stream)) ground += st.points_filtered_ground;
+  EXPECT_EQ(ground, 8u);
+}
+
+// Free rays (the sky) carve the cells they cross: more of F, O still bounded by a closed
+// 2-manifold; ignored with free_ray_length_factor 0.
+TEST(IncrementalSculptor, FreeRaysCarveTheCellsTheyCross) {
+  std::vector<SurfaceKeyframe> stream = StreetStream(12);
+  size_t free_rays = 0;
+  for (SurfaceKeyframe& kf : stream) {
+    for (int i = 0; i < 40; ++i) {  // a fan upwards across the street, over the facades
+      const double a = -1.2 + 2.4 * i / 39.0;
+      kf.free_rays.push_back(
+          {kf.centre, Eigen::Vector3d(0.2 * std::sin(3.0 * a), std::sin(a), std::cos(a))});
+      ++free_rays;
+    }
+  }
+  auto sculpt = [&](double length, size_t* traced, size_t* cells) {
+    SculptorOptions options;
+    options.init_keyframes = 6;  // a batch of 6, then 6 one by one
+    options.free_ray_length_factor = length;
+    IncrementalSculptor sculptor(options);
+    *traced = *cells = 0;
+    size_t cells_f = 0;
+    for (const KeyframeStats& st : Sculpt(sculptor, stream)) {
+      *traced += st.rays_free;
+      *cells += st.free_ray_cells;
+      cells_f = st.cells_f;
+    }
+    EXPECT_EQ(sculptor.CheckInvariants(), "") << "length " << length;
+    const MeshCheckReport report = CheckMesh(sculptor.ExtractMesh());
+    EXPECT_TRUE(report.ok) << "length " << length << ": " << report.Summary();
+    return cells_f;
+  };
+  size_t traced = 0, cells = 0;
+  const size_t without = sculpt(0.0, &traced, &cells);
+  EXPECT_EQ(traced, 0u);
+  EXPECT_EQ(cells, 0u);
+  const size_t with = sculpt(1.0, &traced, &cells);
+  EXPECT_EQ(traced, free_rays);
+  EXPECT_GT(cells, free_rays);
+  EXPECT_GT(with, without);
 }
 
 TEST(SculptorOptions, CheckRejectsBadValues) {

@@ -290,3 +290,69 @@ TEST_F(TinyDriveTest, PosesAreWrittenAndTheLoopCloses) {
 
 }  // namespace
 }  // namespace omni::synth
+
+namespace omni::synth {
+namespace {
+
+// --colour: each pixel is the grey render times its tint, channel by channel, with the same
+// noise: the channel whose tint is 1 equals the grey pixel exactly, the others are the grey
+// level scaled by their tint within rounding; walls come out coloured, roads and the sky grey.
+TEST(SynthColourTest, ColourImagesAreTheGreyImageTimesTheTintOfEachBuilding) {
+  const SyntheticDrive drive = MakeSyntheticDrive(SynthPresetOptions("tiny"), DefaultRig());
+  SynthRenderOptions colour_options = drive.options.render;
+  colour_options.colour = true;
+  colour_options.supersampling = 1;  // one ray per pixel: one tint per pixel
+  SynthRenderOptions grey_options = colour_options;
+  grey_options.colour = false;
+  grey_options.noise_sigma = 0.0;  // without noise the tint scales the level itself
+  colour_options.noise_sigma = 0.0;
+  const SceneRenderer colour(drive.scene, drive.options.seed, colour_options);
+  const SceneRenderer grey(drive.scene, drive.options.seed, grey_options);
+  const size_t frame = 3, camera_index = 1;  // a side camera: facades
+  const Camera& camera = drive.rig.cameras[camera_index];
+  const Rigid3d world_from_cam = drive.WorldFromCamera(frame, camera_index);
+  const cv::Mat c = colour.Render(camera, world_from_cam, 7, 1.0);
+  const cv::Mat g = grey.Render(camera, world_from_cam, 7, 1.0);
+  ASSERT_EQ(c.type(), CV_8UC3);
+  ASSERT_EQ(g.type(), CV_8UC1);
+  ASSERT_EQ(c.size(), g.size());
+  size_t tinted = 0, pixels = 0, wall_pixels = 0, wall_tinted = 0, mismatches = 0, grey_tinted = 0;
+  for (int y = 0; y < c.rows; y += 3) {
+    for (int x = 0; x < c.cols; x += 3) {
+      ++pixels;
+      const cv::Vec3b bgr = c.at<cv::Vec3b>(y, x);
+      const int level = g.at<uint8_t>(y, x);
+      // The pixel's own tint, from what its centre ray hits.
+      const auto hit = colour.CastPixel(camera, world_from_cam, Eigen::Vector2d(x, y));
+      Eigen::Vector3d tint = Eigen::Vector3d::Ones();
+      if (hit) {
+        tint = colour.Tint(drive.scene.objects[hit->triangle] * 16u +
+                           static_cast<uint32_t>(drive.scene.surfaces[hit->triangle]));
+      }
+      // level = round(255 v), channel = round(255 v tint): within one level of tint · level
+      // (unless the grey level is clamped at 255). The single ray of CastPixel and the packet
+      // rays of Render may part at a silhouette: a few pixels get another object's tint.
+      bool matches = true;
+      for (int k = 0; k < 3 && level < 255; ++k) {
+        matches = matches && std::abs(bgr[2 - k] - tint[k] * level) <= 1.0 + 1e-9;
+      }
+      mismatches += matches ? 0 : 1;
+      const bool is_tinted = bgr[0] != bgr[1] || bgr[1] != bgr[2];
+      tinted += is_tinted ? 1 : 0;
+      if (hit && drive.scene.surfaces[hit->triangle] == Surface::kWall) {
+        ++wall_pixels;
+        wall_tinted += is_tinted ? 1 : 0;
+      } else if (!hit || drive.scene.surfaces[hit->triangle] == Surface::kRoad) {
+        grey_tinted += matches && is_tinted ? 1 : 0;
+      }
+    }
+  }
+  EXPECT_LT(mismatches, pixels / 1000 + 1) << mismatches << " of " << pixels;
+  EXPECT_GT(wall_pixels, pixels / 10);
+  EXPECT_GT(wall_tinted, wall_pixels * 9 / 10);
+  EXPECT_GT(tinted, pixels / 10);
+  EXPECT_EQ(grey_tinted, 0u) << "road or sky pixels tinted";
+}
+
+}  // namespace
+}  // namespace omni::synth

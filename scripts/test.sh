@@ -3,7 +3,7 @@
 # unit tests again built with AddressSanitizer and UndefinedBehaviorSanitizer, and a short fuzz
 # run of every parser (docs/errors.md).
 # Environment: BUILD_DIR (default build), OMNI_SANITIZE_TESTS (default 1; 0 skips the sanitizer
-# step, all adds the sfm and surface unit tests to it), OMNI_FUZZ_SECONDS (seconds per parser, default 20; 0 skips the fuzzing).
+# step, all adds the synth, sfm and surface unit tests to it), OMNI_FUZZ_SECONDS (seconds per parser, default 20; 0 skips the fuzzing).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -17,13 +17,15 @@ echo "test.sh: ctest $((SECONDS - step_start)) s"
 
 if [ "${OMNI_SANITIZE_TESTS:-1}" != 0 ]; then
   # Unit tests built with ASan and UBSan at -O1 (Release otherwise: NDEBUG), in their own
-  # folder; a finding aborts the program. By default the folders without CGAL or Ceres (calib:
-  # every reader of an input file; raycast, eval, synth), which fit the CI budget;
-  # OMNI_SANITIZE_TESTS=all adds sfm and surface (a long build: docs/errors.md).
+  # folder; a finding aborts the program. By default calib (every reader of an input file),
+  # raycast and eval, which fit the CI budget; OMNI_SANITIZE_TESTS=all adds synth, sfm and
+  # surface (a long build and synth's slow renders: docs/errors.md).
   step_start=$SECONDS
   sanitize_dir="${build_dir}-sanitize"
-  sanitize_targets=(calib_tests raycast_tests eval_tests synth_tests)
-  if [ "${OMNI_SANITIZE_TESTS:-1}" = all ]; then sanitize_targets+=(sfm_tests surface_tests); fi
+  sanitize_targets=(calib_tests raycast_tests eval_tests)
+  if [ "${OMNI_SANITIZE_TESTS:-1}" = all ]; then
+    sanitize_targets+=(synth_tests sfm_tests surface_tests)
+  fi
   launcher=()
   if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
   if [ ! -f "$sanitize_dir/CMakeCache.txt" ]; then

@@ -5,7 +5,7 @@
 #include <opengv/sac_problems/absolute_pose/AbsolutePoseSacProblem.hpp>
 
 #include "calib/error.h"
-#include "sfm/opengv_ransac.h"
+#include "sfm/absolute_pose_ransac.h"
 
 namespace omni {
 
@@ -21,9 +21,10 @@ RansacResult EstimateCentralAbsolutePose(const std::vector<Eigen::Vector3d>& bea
   opengv::absolute_pose::CentralAbsoluteAdapter adapter(f, points);
   auto problem = std::make_shared<Problem>(adapter, Problem::KNEIP, /*randomSeed=*/false);
   opengv::transformation_t model;
-  const RansacResult result = internal::RunOpengvRansac(
-      problem, bearings.size(), problem->getSampleSize(),
-      internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac, &model);
+  const internal::AbsolutePoseScorer scorer(bearings, points_in_world);
+  const RansacResult result = internal::RunAbsolutePoseRansac(
+      problem, scorer, internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac,
+      &model);
   if (result.success) *world_from_cam = internal::FromOpengvTransformation(model);
   return result;
 }

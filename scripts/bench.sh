@@ -8,7 +8,8 @@
 # usage: scripts/bench.sh [--build DIR] [--compare OTHER_BUILD_DIR] [--rounds N]
 #                         [--cases LIST] [--eval] [--drives DIR] [--out DIR] [--no-build]
 #
-#   --build DIR      the build measured (default build; A in the table)
+#   --build DIR      the build measured (default build; A in the table): a build folder, or a
+#                    folder holding a copied omnisculpt (its commit in DIR/bench_commit.txt)
 #   --compare DIR    a second build (B), run alternated with A: A, B, A, B, ... and the table
 #                    gives the ratios A / B of the medians
 #   --rounds N       runs of every case per build (default 1, 2 with --compare)
@@ -112,8 +113,10 @@ printf 'build\tlabel\tcase\tround\tdrive\tfolder\twall_s\tmax_rss_kb\texit\n' > 
   echo "date=$(date -u +%Y-%m-%dT%H:%M:%SZ)"
   for b in "${builds[@]}"; do
     src=$(sed -n 's/^CMAKE_HOME_DIRECTORY:INTERNAL=//p' "$b/CMakeCache.txt" 2>/dev/null || true)
-    commit=$( [ -n "$src" ] && git -C "$src" rev-parse --short HEAD 2>/dev/null || echo unknown)
-    dirty=$( [ -n "$src" ] && git -C "$src" status --porcelain --untracked-files=no 2>/dev/null | head -1)
+    # A copied binary: the commit in a file beside it (bench_commit.txt), if any.
+    commit=$( [ -n "$src" ] && git -C "$src" rev-parse --short HEAD 2>/dev/null ||
+              cat "$b/bench_commit.txt" 2>/dev/null || echo unknown)
+    dirty=$( [ -n "$src" ] && git -C "$src" status --porcelain --untracked-files=no 2>/dev/null | head -1 || true)
     [ -n "$dirty" ] && commit="$commit+changes"
     echo "build:$b=$commit"
   done

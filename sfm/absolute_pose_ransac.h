@@ -1,7 +1,7 @@
 #pragma once
 // Internal to sfm/ (not a public header): the RANSAC of the resection (absolute pose, central
-// P3P or non-central GP3P through OpenGV's AbsolutePoseSacProblem), the same estimate as
-// OpenGV's opengv::sac::Ransac run by RunOpengvRansac (sfm/opengv_ransac.h), only cheaper:
+// P3P or non-central GP3P through OpenGV's AbsolutePoseSacProblem), the estimate of OpenGV's
+// opengv::sac::Ransac run by RunOpengvRansac (sfm/opengv_ransac.h), only cheaper:
 //  - the hypotheses are drawn in order from the problem's seeded generator, solved and scored
 //    in small batches in parallel (TBB), then accepted in drawing order as the sequential loop
 //    would, with its adaptive stopping (the number of iterations follows the best inlier ratio)
@@ -11,10 +11,15 @@
 //    the point seen from the model, computed the same way) on arrays prepared once, and its
 //    count stops as soon as it can no longer beat the best count known when its batch started
 //    (such a hypothesis would not have been taken).
+//  - the best model is refined on its inliers by Levenberg-Marquardt on the analytic Jacobian
+//    of the cost that OpenGV's refinement minimises with numerical derivatives (the sum of the
+//    squared scores), to the same minimum in a fraction of the time; the refined model is kept
+//    when it has at least as many inliers, as before.
 
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <climits>
 #include <cmath>
@@ -28,6 +33,13 @@
 #include "sfm/ransac.h"
 
 namespace omni::internal {
+
+// The refinement on the inliers (AbsolutePoseScorer::Refine): Levenberg-Marquardt steps until
+// the cost falls by less than this share or the step is this small (radians and metres), at
+// most this many.
+constexpr int kMaxRefineIterations = 30;
+constexpr double kRefineRelativeDecrease = 1e-10;
+constexpr double kRefineMinStep = 1e-10;
 
 // OpenGV's absolute-pose score of every correspondence against a model (world_from_rig as
 // [R t]): the point taken into the rig frame, then into its camera's frame (non-central), made
@@ -70,6 +82,90 @@ class AbsolutePoseScorer {
     inliers->clear();
     for (int i = 0; i < static_cast<int>(size()); ++i)
       if (Score(inverse, i) < threshold) inliers->push_back(i);
+  }
+
+  // The refinement of the model on the inliers: the least squares of OpenGV's score over them
+  // (the cost that opengv::absolute_pose::optimize_nonlinear minimises, there by
+  // Levenberg-Marquardt on numerical derivatives), here by Levenberg-Marquardt on the analytic
+  // Jacobian: the pose perturbed by a rotation and a translation in the rig frame.
+  opengv::transformation_t Refine(const opengv::transformation_t& model,
+                                  const std::vector<int>& inliers) const {
+    using Matrix6 = Eigen::Matrix<double, 6, 6>;
+    using Vector6 = Eigen::Matrix<double, 6, 1>;
+    Eigen::Matrix3d rotation = model.block<3, 3>(0, 0);  // world_from_rig
+    Eigen::Vector3d translation = model.col(3);
+    // Cost, and (when wanted) the normal equations, at a pose.
+    auto evaluate = [&](const Eigen::Matrix3d& r, const Eigen::Vector3d& t, Matrix6* jtj,
+                        Vector6* jtf) {
+      const Eigen::Matrix3d rig_from_world = r.transpose();
+      double cost = 0.0;
+      if (jtj != nullptr) {
+        jtj->setZero();
+        jtf->setZero();
+      }
+      for (int i : inliers) {
+        const Eigen::Vector3d q = rig_from_world * (points_[i] - t);  // the point in the rig
+        Eigen::Vector3d in_camera = q;
+        const Eigen::Matrix3d* cam_from_rig = nullptr;
+        if (cameras_ != nullptr) {
+          const int c = (*cameras_)[i];
+          cam_from_rig = &cam_rotations_transposed_[c];
+          in_camera = *cam_from_rig * (q - cam_offsets_[c]);
+        }
+        const double norm = in_camera.norm();
+        const Eigen::Vector3d unit = in_camera / norm;
+        const double residual = 1.0 - unit.dot(bearings_[i]);
+        cost += residual * residual;
+        if (jtj == nullptr) continue;
+        // d residual / d in_camera, then in the rig frame: q moves by q x w - d for a rotation
+        // w (world_from_rig * exp(w)) and a translation R d.
+        const Eigen::Vector3d g = -(bearings_[i] - unit * unit.dot(bearings_[i])) / norm;
+        const Eigen::Vector3d h = cam_from_rig != nullptr ? cam_from_rig->transpose() * g : g;
+        Vector6 row;
+        row.head<3>() = h.cross(q);
+        row.tail<3>() = -h;
+        *jtj += row * row.transpose();
+        *jtf += row * residual;
+      }
+      return cost;
+    };
+    Matrix6 jtj;
+    Vector6 jtf;
+    double cost = evaluate(rotation, translation, &jtj, &jtf);
+    double lambda = 1e-3;
+    for (int iteration = 0; iteration < kMaxRefineIterations && cost > 0.0; ++iteration) {
+      // Each score is about half the squared angle, so the cost is quartic in the angles and its
+      // Hessian about 1.5 times the Gauss-Newton one: the Gauss-Newton step would overshoot by
+      // half (converging only linearly).
+      Matrix6 damped = 1.5 * jtj;
+      damped.diagonal() *= 1.0 + lambda;
+      const Vector6 step = damped.ldlt().solve(-jtf);
+      if (!step.allFinite()) break;
+      const Eigen::Matrix3d new_rotation =
+          rotation * Eigen::AngleAxisd(step.head<3>().norm(),
+                                       step.head<3>().norm() > 0.0
+                                           ? Eigen::Vector3d(step.head<3>().normalized())
+                                           : Eigen::Vector3d::UnitX())
+                         .toRotationMatrix();
+      const Eigen::Vector3d new_translation = translation + rotation * step.tail<3>();
+      const double new_cost = evaluate(new_rotation, new_translation, nullptr, nullptr);
+      if (new_cost < cost) {
+        const bool converged =
+            cost - new_cost <= kRefineRelativeDecrease * cost || step.norm() <= kRefineMinStep;
+        rotation = new_rotation;
+        translation = new_translation;
+        cost = evaluate(rotation, translation, &jtj, &jtf);
+        lambda = std::max(lambda / 10.0, 1e-12);
+        if (converged) break;
+      } else {
+        lambda *= 10.0;
+        if (lambda > 1e8) break;
+      }
+    }
+    opengv::transformation_t refined;
+    refined.block<3, 3>(0, 0) = rotation;
+    refined.col(3) = translation;
+    return refined;
   }
 
  private:
@@ -183,8 +279,7 @@ inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProb
   std::vector<int> inliers;
   scorer.Select(best_model, threshold, &inliers);
   if (options.refine && static_cast<int>(inliers.size()) > sample_size) {
-    opengv::transformation_t refined;
-    problem->optimizeModelCoefficients(inliers, best_model, refined);
+    const opengv::transformation_t refined = scorer.Refine(best_model, inliers);
     if (refined.allFinite()) {
       std::vector<int> refined_inliers;
       scorer.Select(refined, threshold, &refined_inliers);

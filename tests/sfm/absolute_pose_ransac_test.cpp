@@ -1,6 +1,7 @@
 // The resection's RANSAC (sfm/absolute_pose_ransac.h: hypotheses in parallel batches, counts
-// that stop once they cannot win) against OpenGV's sequential opengv::sac::Ransac
-// (sfm/opengv_ransac.h) on the same problem and seed: the same iterations, inliers and model.
+// that stop once they cannot win, the refinement on analytic derivatives) against OpenGV's
+// sequential opengv::sac::Ransac and its refinement (sfm/opengv_ransac.h) on the same problem
+// and seed: the same iterations and inliers, the same model.
 
 #include "sfm/absolute_pose_ransac.h"
 
@@ -42,13 +43,19 @@ Frame FrameOf(const Rig& rig, double outlier_ratio, uint32_t seed) {
   return frame;
 }
 
+// The refinements differ (OpenGV: numerical derivatives; here: analytic) but reach the same
+// minimum of a flat (quartic) cost: the refined models agree to 1e-5 (metres, rotation entries:
+// 0.005 pixel at 500 px, far below the noise of 5e-4 rad), the inliers exactly.
 void ExpectSameEstimate(const RansacResult& sequential, const opengv::transformation_t& expected,
-                        const RansacResult& batched, const opengv::transformation_t& model) {
+                        const RansacResult& batched, const opengv::transformation_t& model,
+                        bool refined) {
   ASSERT_EQ(batched.success, sequential.success);
   EXPECT_EQ(batched.num_iterations, sequential.num_iterations);
   EXPECT_EQ(batched.num_inliers, sequential.num_inliers);
   EXPECT_EQ(batched.inlier_mask, sequential.inlier_mask);
-  if (sequential.success) EXPECT_LT((model - expected).cwiseAbs().maxCoeff(), 1e-12);
+  if (sequential.success) {
+    EXPECT_LT((model - expected).cwiseAbs().maxCoeff(), refined ? 1e-5 : 1e-12);
+  }
 }
 
 class AbsolutePoseRansacTest : public ::testing::TestWithParam<std::tuple<double, uint32_t, bool>> {
@@ -74,7 +81,7 @@ TEST_P(AbsolutePoseRansacTest, CentralGivesOpengvsSequentialEstimate) {
   const internal::AbsolutePoseScorer scorer(frame.bearings, frame.points);
   const RansacResult batched =
       internal::RunAbsolutePoseRansac(again, scorer, threshold, options, &model);
-  ExpectSameEstimate(sequential, expected, batched, model);
+  ExpectSameEstimate(sequential, expected, batched, model, refine);
   EXPECT_TRUE(sequential.success);
 }
 
@@ -103,7 +110,7 @@ TEST_P(AbsolutePoseRansacTest, NoncentralGivesOpengvsSequentialEstimate) {
                                             &rotations, &offsets);
   const RansacResult batched =
       internal::RunAbsolutePoseRansac(again, scorer, threshold, options, &model);
-  ExpectSameEstimate(sequential, expected, batched, model);
+  ExpectSameEstimate(sequential, expected, batched, model, refine);
   EXPECT_TRUE(sequential.success);
 }
 
@@ -126,7 +133,7 @@ TEST(AbsolutePoseRansac, IterationLimitIsTheSequentialOne) {
   const RansacResult batched =
       internal::RunAbsolutePoseRansac(again, scorer, threshold, options, &model);
   EXPECT_GE(sequential.num_iterations, options.max_iterations);
-  ExpectSameEstimate(sequential, expected, batched, model);
+  ExpectSameEstimate(sequential, expected, batched, model, options.refine);
 }
 
 INSTANTIATE_TEST_SUITE_P(OutliersSeedsRefinement, AbsolutePoseRansacTest,

@@ -12,7 +12,7 @@ namespace omni {
 RansacResult EstimateCentralAbsolutePose(const std::vector<Eigen::Vector3d>& bearings,
                                          const std::vector<Eigen::Vector3d>& points_in_world,
                                          const CentralAbsolutePoseOptions& options,
-                                         Rigid3d* world_from_cam) {
+                                         Rigid3d* world_from_cam, const PosePrior* prior) {
   assert(bearings.size() == points_in_world.size());
   ThrowIfInvalid(options.Check(), "CentralAbsolutePoseOptions");
   using Problem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
@@ -24,7 +24,7 @@ RansacResult EstimateCentralAbsolutePose(const std::vector<Eigen::Vector3d>& bea
   const internal::AbsolutePoseScorer scorer(bearings, points_in_world);
   const RansacResult result = internal::RunAbsolutePoseRansac(
       problem, scorer, internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac,
-      &model);
+      &model, prior);
   if (result.success) *world_from_cam = internal::FromOpengvTransformation(model);
   return result;
 }

@@ -15,7 +15,7 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
                                             const std::vector<int>& cameras,
                                             const std::vector<Eigen::Vector3d>& points_in_world,
                                             const NoncentralAbsolutePoseOptions& options,
-                                            Rigid3d* world_from_rig) {
+                                            Rigid3d* world_from_rig, const PosePrior* prior) {
   assert(bearings.size() == points_in_world.size() && cameras.size() == bearings.size());
   ThrowIfInvalid(options.Check(), "NoncentralAbsolutePoseOptions");
   using Problem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
@@ -32,7 +32,7 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
                                             &cam_offsets);
   const RansacResult result = internal::RunAbsolutePoseRansac(
       problem, scorer, internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac,
-      &model);
+      &model, prior);
   if (result.success) *world_from_rig = internal::FromOpengvTransformation(model);
   return result;
 }

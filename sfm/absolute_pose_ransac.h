@@ -11,6 +11,8 @@
 //    the point seen from the model, computed the same way) on arrays prepared once, and its
 //    count stops as soon as it can no longer beat the best count known when its batch started
 //    (such a hypothesis would not have been taken).
+//  - with a prior pose (sfm/ransac.h PosePrior) that explains enough correspondences, no
+//    sampling at all;
 //  - the best model is refined on its inliers by Levenberg-Marquardt on the analytic Jacobian
 //    of the cost that OpenGV's refinement minimises with numerical derivatives (the sum of the
 //    squared scores), to the same minimum in a fraction of the time; the refined model is kept
@@ -207,13 +209,39 @@ using AbsolutePoseProblem = opengv::sac_problems::absolute_pose::AbsolutePoseSac
 inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProblem>& problem,
                                           const AbsolutePoseScorer& scorer, double threshold,
                                           const RansacOptions& options,
-                                          opengv::transformation_t* model) {
+                                          opengv::transformation_t* model,
+                                          const PosePrior* prior = nullptr) {
   RansacResult result;
   const size_t num_correspondences = scorer.size();
   result.inlier_mask.assign(num_correspondences, 0);
   const int sample_size = problem->getSampleSize();
   const int min_inliers = std::max(options.min_inliers, sample_size);
   if (static_cast<int>(num_correspondences) < min_inliers) return result;
+
+  if (prior != nullptr) {
+    opengv::transformation_t candidate = prior->pose.ToMatrix();
+    std::vector<int> inliers;
+    scorer.Select(candidate, threshold, &inliers);
+    for (int round = 0;
+         round < 2 && options.refine && static_cast<int>(inliers.size()) > sample_size; ++round) {
+      const opengv::transformation_t refined = scorer.Refine(candidate, inliers);
+      if (!refined.allFinite()) break;
+      std::vector<int> refined_inliers;
+      scorer.Select(refined, threshold, &refined_inliers);
+      if (refined_inliers.size() < inliers.size()) break;
+      candidate = refined;
+      inliers = std::move(refined_inliers);
+    }
+    if (static_cast<int>(inliers.size()) >= std::max(min_inliers, prior->accept_inliers)) {
+      result.success = true;
+      result.from_prior = true;
+      result.num_inliers = static_cast<int>(inliers.size());
+      for (int index : inliers) result.inlier_mask[index] = 1;
+      *model = candidate;
+      return result;
+    }
+  }
+
   SeedOpengvProblem(problem.get(), options.seed);
 
   // The loop of opengv::sac::Ransac::computeModel, batch by batch.

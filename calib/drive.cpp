@@ -1,6 +1,7 @@
 #include "calib/drive.h"
 
 #include <spdlog/spdlog.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <array>
@@ -78,20 +79,17 @@ uint32_t BigEndian32(const unsigned char* bytes) {
          uint32_t{bytes[3]};
 }
 
-// The CRC-32 of PNG chunks (ISO 3309, polynomial 0xEDB88320).
+// The CRC-32 of PNG chunks (ISO 3309, polynomial 0xEDB88320): zlib's, several times faster than
+// a table lookup per byte (it is computed for every image the SfM reads).
 uint32_t Crc32(const unsigned char* bytes, size_t size) {
-  static const auto table = [] {
-    std::array<uint32_t, 256> entries{};
-    for (uint32_t n = 0; n < 256; ++n) {
-      uint32_t c = n;
-      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      entries[n] = c;
-    }
-    return entries;
-  }();
-  uint32_t crc = 0xFFFFFFFFu;
-  for (size_t i = 0; i < size; ++i) crc = table[(crc ^ bytes[i]) & 0xFF] ^ (crc >> 8);
-  return crc ^ 0xFFFFFFFFu;
+  uLong crc = crc32(0L, Z_NULL, 0);
+  while (size > 0) {  // zlib takes the length as uInt
+    const uInt chunk = static_cast<uInt>(std::min<size_t>(size, 1u << 30));
+    crc = crc32(crc, bytes, chunk);
+    bytes += chunk;
+    size -= chunk;
+  }
+  return static_cast<uint32_t>(crc);
 }
 
 // The problem with the chunks of a PNG file (signature checked by the caller), or "".

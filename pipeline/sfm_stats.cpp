@@ -31,6 +31,7 @@ std::string SfmStagesCsv(const SfmStats& s) {
       {"match", s.front.match},
       {"resect", s.back.resect},
       {"triangulate", s.back.triangulate},
+      {"map_search", s.back.map_search},
       {"bundle_adjustment", s.back.bundle_adjustment},
       {"loop_closure", s.loop_closure_seconds},
       {"final_bundle_adjustment", s.final_bundle_adjustment_seconds},

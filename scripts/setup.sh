@@ -10,8 +10,10 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libceres-dev libcgal-dev libgmp-dev libmpfr-dev libtbb-dev
   libopengv-dev libembree-dev libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev libyaml-cpp-dev
+  zlib1g-dev
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
   clang libclang-rt-14-dev e2fsprogs
+  time  # /usr/bin/time -v: peak RSS in scripts/bench.sh
 )
 # The web viewer (`omnisculpt view`): npm installs the pinned three.js of viewer/package-lock.json
 # at build time (into the build folder); its browser test runs Debian's chromium, headless.

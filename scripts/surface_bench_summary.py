@@ -21,16 +21,13 @@ def quantile(values, q):
     return v[min(len(v) - 1, int(q * len(v)))] if v else 0.0
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("out")
-    ap.add_argument("--loop-radius", type=float, default=77.0,
-                    help="metres (default r + l of the paper with s = 1.9 m: 15 s + 15 s sqrt(3))")
-    ap.add_argument("--loop-gap", type=int, default=60)
-    a = ap.parse_args()
-    rows = list(csv.DictReader(open(os.path.join(a.out, "stats", "keyframes.csv"))))
+def timing_summary(out, loop_radius=77.0, loop_gap=60):
+    """The per-keyframe times of OUT/stats/keyframes.csv: a dict with the rows, the incremental
+    rows, the loop-closing zone's count, ms per keyframe (all steps and steps 1-5) median / p95 /
+    max and their flatness ratios."""
+    rows = list(csv.DictReader(open(os.path.join(out, "stats", "keyframes.csv"))))
     centres = {}
-    tum = os.path.join(a.out, "poses.tum")
+    tum = os.path.join(out, "poses.tum")
     if os.path.exists(tum):
         for i, line in enumerate(l for l in open(tum) if l.strip() and not l.startswith("#")):
             f = line.split()
@@ -45,19 +42,36 @@ def main():
         if k not in centres:
             return False
         c = centres[k]
-        return any(math.dist(c, centres[j]) < a.loop_radius for j in range(0, k - a.loop_gap)
+        return any(math.dist(c, centres[j]) < loop_radius for j in range(0, k - loop_gap)
                    if j in centres)
 
     kept = [(f(r, "ms_total"), s) for r, s in zip(inc, steps15) if not in_loop_zone(r)]
     fifth = max(1, len(kept) // 5)
     flat = lambda i: (statistics.mean(x[i] for x in kept[-fifth:]) /
                       max(1e-9, statistics.mean(x[i] for x in kept[:fifth]))) if kept else 0.0
+    return {"rows": rows, "incremental": inc, "loop_zone": len(inc) - len(kept),
+            "total_median": quantile(total, .5), "total_p95": quantile(total, .95),
+            "total_max": max(total, default=0), "total_flatness": flat(0),
+            "steps15_median": quantile(steps15, .5), "steps15_p95": quantile(steps15, .95),
+            "steps15_max": max(steps15, default=0), "steps15_flatness": flat(1)}
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("out")
+    ap.add_argument("--loop-radius", type=float, default=77.0,
+                    help="metres (default r + l of the paper with s = 1.9 m: 15 s + 15 s sqrt(3))")
+    ap.add_argument("--loop-gap", type=int, default=60)
+    a = ap.parse_args()
+    t = timing_summary(a.out, a.loop_radius, a.loop_gap)
+    rows, inc = t["rows"], t["incremental"]
+    f = lambda r, k: float(r.get(k, 0) or 0)
     print(f"{a.out}: {len(rows)} rows, {len(inc)} incremental keyframes, "
-          f"{len(inc) - len(kept)} in the loop-closing zone")
-    print(f"  ms per keyframe (all steps): median {quantile(total, .5):.1f} p95 "
-          f"{quantile(total, .95):.1f} max {max(total, default=0):.1f}; flatness {flat(0):.2f}")
-    print(f"  ms per keyframe (steps 1-5): median {quantile(steps15, .5):.1f} p95 "
-          f"{quantile(steps15, .95):.1f} max {max(steps15, default=0):.1f}; flatness {flat(1):.2f}")
+          f"{t['loop_zone']} in the loop-closing zone")
+    print(f"  ms per keyframe (all steps): median {t['total_median']:.1f} p95 "
+          f"{t['total_p95']:.1f} max {t['total_max']:.1f}; flatness {t['total_flatness']:.2f}")
+    print(f"  ms per keyframe (steps 1-5): median {t['steps15_median']:.1f} p95 "
+          f"{t['steps15_p95']:.1f} max {t['steps15_max']:.1f}; flatness {t['steps15_flatness']:.2f}")
     print(f"  max |E| {max((int(r['cells_e']) for r in inc), default=0)}; cells in T at the end "
           f"{rows[-1]['cells_t'] if rows else 0}")
     keys = ["ms_steiner", "ms_enclose", "ms_shrink", "ms_insert", "ms_rays", "ms_rays_select",

@@ -5,14 +5,14 @@
 #include <opengv/sac_problems/absolute_pose/AbsolutePoseSacProblem.hpp>
 
 #include "calib/error.h"
-#include "sfm/opengv_ransac.h"
+#include "sfm/absolute_pose_ransac.h"
 
 namespace omni {
 
 RansacResult EstimateCentralAbsolutePose(const std::vector<Eigen::Vector3d>& bearings,
                                          const std::vector<Eigen::Vector3d>& points_in_world,
                                          const CentralAbsolutePoseOptions& options,
-                                         Rigid3d* world_from_cam) {
+                                         Rigid3d* world_from_cam, const PosePrior* prior) {
   assert(bearings.size() == points_in_world.size());
   ThrowIfInvalid(options.Check(), "CentralAbsolutePoseOptions");
   using Problem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
@@ -21,9 +21,10 @@ RansacResult EstimateCentralAbsolutePose(const std::vector<Eigen::Vector3d>& bea
   opengv::absolute_pose::CentralAbsoluteAdapter adapter(f, points);
   auto problem = std::make_shared<Problem>(adapter, Problem::KNEIP, /*randomSeed=*/false);
   opengv::transformation_t model;
-  const RansacResult result = internal::RunOpengvRansac(
-      problem, bearings.size(), problem->getSampleSize(),
-      internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac, &model);
+  const internal::AbsolutePoseScorer scorer(bearings, points_in_world);
+  const RansacResult result = internal::RunAbsolutePoseRansac(
+      problem, scorer, internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac,
+      &model, prior);
   if (result.success) *world_from_cam = internal::FromOpengvTransformation(model);
   return result;
 }

@@ -21,10 +21,11 @@ struct CentralAbsolutePoseOptions {
 };
 
 // bearings[i] (unit, camera frame) observes points_in_world[i]. On success world_from_cam is
-// the camera's pose. For a rig in central mode the "camera" is the rig's central frame.
+// the camera's pose. A prior (sfm/ransac.h) is tried before the RANSAC. For a rig in central mode
+// the "camera" is the rig's central frame.
 RansacResult EstimateCentralAbsolutePose(const std::vector<Eigen::Vector3d>& bearings,
                                          const std::vector<Eigen::Vector3d>& points_in_world,
                                          const CentralAbsolutePoseOptions& options,
-                                         Rigid3d* world_from_cam);
+                                         Rigid3d* world_from_cam, const PosePrior* prior = nullptr);
 
 }  // namespace omni

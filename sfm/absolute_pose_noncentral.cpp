@@ -5,7 +5,7 @@
 #include <opengv/sac_problems/absolute_pose/AbsolutePoseSacProblem.hpp>
 
 #include "calib/error.h"
-#include "sfm/opengv_ransac.h"
+#include "sfm/absolute_pose_ransac.h"
 #include "sfm/opengv_rig.h"
 
 namespace omni {
@@ -15,7 +15,7 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
                                             const std::vector<int>& cameras,
                                             const std::vector<Eigen::Vector3d>& points_in_world,
                                             const NoncentralAbsolutePoseOptions& options,
-                                            Rigid3d* world_from_rig) {
+                                            Rigid3d* world_from_rig, const PosePrior* prior) {
   assert(bearings.size() == points_in_world.size() && cameras.size() == bearings.size());
   ThrowIfInvalid(options.Check(), "NoncentralAbsolutePoseOptions");
   using Problem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
@@ -28,9 +28,11 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
                                                            cam_rotations);
   auto problem = std::make_shared<Problem>(adapter, Problem::GP3P, /*randomSeed=*/false);
   opengv::transformation_t model;
-  const RansacResult result = internal::RunOpengvRansac(
-      problem, bearings.size(), problem->getSampleSize(),
-      internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac, &model);
+  const internal::AbsolutePoseScorer scorer(bearings, points_in_world, &cameras, &cam_rotations,
+                                            &cam_offsets);
+  const RansacResult result = internal::RunAbsolutePoseRansac(
+      problem, scorer, internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac,
+      &model, prior);
   if (result.success) *world_from_rig = internal::FromOpengvTransformation(model);
   return result;
 }

@@ -23,12 +23,13 @@ struct NoncentralAbsolutePoseOptions {
 };
 
 // bearings[i] (unit, frame of camera cameras[i]) observes points_in_world[i]. On success
-// world_from_rig is the rig's pose.
+// world_from_rig is the rig's pose. A prior (sfm/ransac.h) is tried before the RANSAC.
 RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
                                             const std::vector<Eigen::Vector3d>& bearings,
                                             const std::vector<int>& cameras,
                                             const std::vector<Eigen::Vector3d>& points_in_world,
                                             const NoncentralAbsolutePoseOptions& options,
-                                            Rigid3d* world_from_rig);
+                                            Rigid3d* world_from_rig,
+                                            const PosePrior* prior = nullptr);
 
 }  // namespace omni

@@ -27,6 +27,14 @@ inline Rigid3d FromOpengvTransformation(const opengv::transformation_t& first_fr
 // OpenGV's per-view score is 1 − cos(angle).
 inline double AngleToOpengvScore(double angle) { return 1.0 - std::cos(angle); }
 
+// The problem's generator is a copy of rng_alg_ bound at construction: reseed both.
+template <typename Problem>
+void SeedOpengvProblem(Problem* problem, uint32_t seed) {
+  problem->rng_alg_.seed(seed);
+  problem->rng_gen_ =
+      std::make_shared<std::function<int()>>(std::bind(*problem->rng_dist_, problem->rng_alg_));
+}
+
 template <typename Problem>
 RansacResult RunOpengvRansac(const std::shared_ptr<Problem>& problem, size_t num_correspondences,
                              int sample_size, double threshold, const RansacOptions& options,
@@ -36,10 +44,7 @@ RansacResult RunOpengvRansac(const std::shared_ptr<Problem>& problem, size_t num
   const int min_inliers = std::max(options.min_inliers, sample_size);
   if (static_cast<int>(num_correspondences) < min_inliers) return result;
 
-  // The problem's generator is a copy of rng_alg_ bound at construction: reseed both.
-  problem->rng_alg_.seed(options.seed);
-  problem->rng_gen_ =
-      std::make_shared<std::function<int()>>(std::bind(*problem->rng_dist_, problem->rng_alg_));
+  SeedOpengvProblem(problem.get(), options.seed);
 
   opengv::sac::Ransac<Problem> ransac;
   ransac.sac_model_ = problem;

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "calib/pose.h"
+
 namespace omni {
 
 struct RansacOptions {
@@ -25,11 +27,22 @@ struct RansacOptions {
   std::string Check() const;
 };
 
+// A pose tried before the resection's RANSAC (the motion model's prediction, or the frame's
+// earlier resection): its inliers at the RANSAC's threshold, the pose refined on them and the
+// inliers selected again (twice, each kept only when it has at least as many), are the estimate
+// without any sampling when they are at least accept_inliers (and the RANSAC's minimum).
+// Otherwise the RANSAC runs as without it.
+struct PosePrior {
+  Rigid3d pose;  // in the frame the estimate is in (world_from_rig; central: world_from_cam)
+  int accept_inliers = 0;
+};
+
 struct RansacResult {
   bool success = false;
   std::vector<char> inlier_mask;  // one per input correspondence
   int num_inliers = 0;
   int num_iterations = 0;
+  bool from_prior = false;  // the PosePrior was taken (no sampling)
 };
 
 }  // namespace omni

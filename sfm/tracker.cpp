@@ -39,6 +39,8 @@ std::string TrackerOptions::Check() const {
     return "min_consistent_inliers: expected 0 or in [6, min_resection_inliers]";
   if (!(consistent_inlier_share > 0.5 && consistent_inlier_share <= 1.0))
     return "consistent_inlier_share: expected in (0.5, 1]";
+  if (!(resection_prior_share > 0.0 && resection_prior_share <= 1.0))
+    return "resection_prior_share: expected a share in (0, 1]";
   if (!(max_jump_ratio > 1.0)) return "max_jump_ratio: expected more than 1";
   if (map_search_keyframes < 1) return "map_search_keyframes: expected at least 1";
   if (max_handover_delay < 0) return "max_handover_delay: expected 0 or more keyframes";
@@ -210,8 +212,10 @@ struct Tracker::Impl {
     Rigid3d world_from_rig;
     bool ok = false;
   };
-  // P3P / GP3P in RANSAC on the observations of live map points.
-  Resection Resect(const std::vector<TrackObservation>& observations);
+  // P3P / GP3P in RANSAC on the observations of live map points; a prior pose (world_from_rig)
+  // is tried first and taken without the RANSAC when it has accept_inliers inliers.
+  Resection Resect(const std::vector<TrackObservation>& observations,
+                   const Rigid3d* prior_world_from_rig = nullptr, int accept_inliers = 0);
   void TriangulateNewPoints(int keyframe);
   void LocalBundleAdjustment();
   void FinalizeUpTo(int end);
@@ -381,7 +385,9 @@ std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
   return result;
 }
 
-Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservation>& observations) {
+Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservation>& observations,
+                                               const Rigid3d* prior_world_from_rig,
+                                               int accept_inliers) {
   const auto start = std::chrono::steady_clock::now();
   Resection r;
   for (size_t j = 0; j < observations.size(); ++j) {
@@ -392,17 +398,26 @@ Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservatio
     r.positions.push_back(points[it->second].position);
     r.observation_index.push_back(static_cast<int>(j));
   }
+  PosePrior prior;
+  if (prior_world_from_rig != nullptr) {
+    prior.pose = *prior_world_from_rig;
+    prior.accept_inliers = std::max(accept_inliers, options.min_resection_inliers);
+  }
   if (options.central) {
     CentralAbsolutePoseOptions absolute;
     absolute.ransac = options.resection_ransac;
+    // The central frame sits at central_center in the rig frame.
+    prior.pose.translation += prior.pose.rotation * central_center;
     Rigid3d world_from_central;
-    r.ransac = EstimateCentralAbsolutePose(r.bearings, r.positions, absolute, &world_from_central);
+    r.ransac = EstimateCentralAbsolutePose(r.bearings, r.positions, absolute, &world_from_central,
+                                           prior_world_from_rig != nullptr ? &prior : nullptr);
     r.world_from_rig = RigFromCentral(world_from_central);
   } else {
     NoncentralAbsolutePoseOptions absolute;
     absolute.ransac = options.resection_ransac;
     r.ransac = EstimateNoncentralAbsolutePose(rig, r.bearings, r.cameras, r.positions, absolute,
-                                              &r.world_from_rig);
+                                              &r.world_from_rig,
+                                              prior_world_from_rig != nullptr ? &prior : nullptr);
   }
   const int inliers = r.ransac.num_inliers;
   const bool consistent =
@@ -436,7 +451,22 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   FrameResult result;
   // The frame's observations, re-labelled (and completed) by the map-point search.
   std::vector<TrackObservation> observations = input_observations;
-  Resection resection = Resect(observations);
+  // The motion model's prediction first: taken without the RANSAC when it explains at least
+  // resection_prior_share of the observations of map points.
+  Resection resection;
+  Rigid3d motion_prior;
+  if (options.resection_prior_share < 1.0 && !last_tracked.empty() &&
+      Predict(num_frames - 1, &motion_prior)) {
+    int with_points = 0;
+    for (const TrackObservation& o : observations) {
+      const auto it = track_to_point.find(o.track);
+      with_points += it != track_to_point.end() && points[it->second].alive;
+    }
+    resection = Resect(observations, &motion_prior,
+                       static_cast<int>(std::ceil(options.resection_prior_share * with_points)));
+  } else {
+    resection = Resect(observations);
+  }
   bool searched = false;
   if (!resection.ok && search && !last_tracked.empty()) {
     // Too few chained tracks: search the map points around the constant-velocity prediction
@@ -482,7 +512,12 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
     const int found = Reobserve(&observations, resection.world_from_rig, 1.0, search);
     result.reobserved += found;
     if (found > 0 && options.resect_after_search) {
-      Resection again = Resect(observations);
+      // The pose just resected first: kept without the RANSAC when it has at least as many
+      // inliers among the observations the search completed.
+      Resection again =
+          options.resection_prior_after_search
+              ? Resect(observations, &resection.world_from_rig, resection.ransac.num_inliers)
+              : Resect(observations);
       if (again.ok && again.ransac.num_inliers >= resection.ransac.num_inliers)
         resection = std::move(again);
     }

@@ -66,6 +66,14 @@ struct TrackerOptions {
   // turn, a frame after a gap); 0: off.
   int min_consistent_inliers = 15;
   double consistent_inlier_share = 0.75;
+  // The resection may try a prior pose before its RANSAC (sfm/ransac.h PosePrior); both are off
+  // by default: on the demo drive they halved the resection's time but moved the ATE both ways
+  // (docs/figures.md F23). The frame's first resection: the motion model's
+  // prediction, taken when (refined on its inliers) it explains at least this share of the
+  // frame's observations of map points (1: never tried). The resection after the map-point
+  // search: the frame's first resection, taken when it keeps at least its inliers.
+  double resection_prior_share = 1.0;
+  bool resection_prior_after_search = false;
   // Never a silently wrong map: a resected centre farther from the constant-velocity
   // prediction than max_jump_ratio times a step (the larger of the last step and the mean step
   // so far) times the frames since the last tracked one is rejected as a wrong pose.

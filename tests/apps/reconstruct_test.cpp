@@ -230,8 +230,8 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
   EXPECT_NEAR(sfm_stages["total"], sfm_seconds, 1e-4 * sfm_seconds);
   double stages_sum = 0.0;
   for (const char* stage :
-       {"load_wait", "detect", "match", "resect", "triangulate", "bundle_adjustment",
-        "loop_closure", "final_bundle_adjustment", "queue_wait", "other"}) {
+       {"load_wait", "detect", "match", "resect", "triangulate", "map_search",
+        "bundle_adjustment", "loop_closure", "final_bundle_adjustment", "queue_wait", "other"}) {
     ASSERT_EQ(sfm_stages.count(stage), 1u) << stage;
     EXPECT_GE(sfm_stages[stage], 0.0) << stage;
     stages_sum += sfm_stages[stage];

@@ -58,6 +58,27 @@ void ExpectSameEstimate(const RansacResult& sequential, const opengv::transforma
   }
 }
 
+// OpenGV's sequential RANSAC and the batched one on the same problem: the same estimate.
+void ExpectBatchedAsSequential(opengv::absolute_pose::AbsoluteAdapterBase& adapter,
+                               Problem::algorithm_t algorithm,
+                               const internal::AbsolutePoseScorer& scorer, uint32_t seed,
+                               bool refine) {
+  RansacOptions options;
+  options.seed = seed;
+  options.refine = refine;
+  const double threshold = internal::AngleToOpengvScore(options.max_angle_error);
+  auto problem = std::make_shared<Problem>(adapter, algorithm, false);
+  opengv::transformation_t expected, model;
+  const RansacResult sequential =
+      internal::RunOpengvRansac(problem, adapter.getNumberCorrespondences(),
+                                problem->getSampleSize(), threshold, options, &expected);
+  auto again = std::make_shared<Problem>(adapter, algorithm, false);
+  const RansacResult batched =
+      internal::RunAbsolutePoseRansac(again, scorer, threshold, options, &model);
+  ExpectSameEstimate(sequential, expected, batched, model, refine);
+  EXPECT_TRUE(sequential.success);
+}
+
 class AbsolutePoseRansacTest : public ::testing::TestWithParam<std::tuple<double, uint32_t, bool>> {
 };
 
@@ -68,21 +89,8 @@ TEST_P(AbsolutePoseRansacTest, CentralGivesOpengvsSequentialEstimate) {
   const opengv::bearingVectors_t f(frame.bearings.begin(), frame.bearings.end());
   const opengv::points_t p(frame.points.begin(), frame.points.end());
   opengv::absolute_pose::CentralAbsoluteAdapter adapter(f, p);
-  RansacOptions options;
-  options.seed = seed;
-  options.refine = refine;
-  const double threshold = internal::AngleToOpengvScore(options.max_angle_error);
-
-  auto problem = std::make_shared<Problem>(adapter, Problem::KNEIP, false);
-  opengv::transformation_t expected, model;
-  const RansacResult sequential = internal::RunOpengvRansac(
-      problem, f.size(), problem->getSampleSize(), threshold, options, &expected);
-  auto again = std::make_shared<Problem>(adapter, Problem::KNEIP, false);
   const internal::AbsolutePoseScorer scorer(frame.bearings, frame.points);
-  const RansacResult batched =
-      internal::RunAbsolutePoseRansac(again, scorer, threshold, options, &model);
-  ExpectSameEstimate(sequential, expected, batched, model, refine);
-  EXPECT_TRUE(sequential.success);
+  ExpectBatchedAsSequential(adapter, Problem::KNEIP, scorer, seed, refine);
 }
 
 TEST_P(AbsolutePoseRansacTest, NoncentralGivesOpengvsSequentialEstimate) {
@@ -96,22 +104,9 @@ TEST_P(AbsolutePoseRansacTest, NoncentralGivesOpengvsSequentialEstimate) {
   opengv::rotations_t rotations;
   internal::ToOpengvRig(rig, &offsets, &rotations);
   opengv::absolute_pose::NoncentralAbsoluteAdapter adapter(f, frame.cameras, p, offsets, rotations);
-  RansacOptions options;
-  options.seed = seed;
-  options.refine = refine;
-  const double threshold = internal::AngleToOpengvScore(options.max_angle_error);
-
-  auto problem = std::make_shared<Problem>(adapter, Problem::GP3P, false);
-  opengv::transformation_t expected, model;
-  const RansacResult sequential = internal::RunOpengvRansac(
-      problem, f.size(), problem->getSampleSize(), threshold, options, &expected);
-  auto again = std::make_shared<Problem>(adapter, Problem::GP3P, false);
   const internal::AbsolutePoseScorer scorer(frame.bearings, frame.points, &frame.cameras,
                                             &rotations, &offsets);
-  const RansacResult batched =
-      internal::RunAbsolutePoseRansac(again, scorer, threshold, options, &model);
-  ExpectSameEstimate(sequential, expected, batched, model, refine);
-  EXPECT_TRUE(sequential.success);
+  ExpectBatchedAsSequential(adapter, Problem::GP3P, scorer, seed, refine);
 }
 
 TEST(AbsolutePoseRansac, IterationLimitIsTheSequentialOne) {

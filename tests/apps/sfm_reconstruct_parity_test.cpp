@@ -181,8 +181,9 @@ TEST(SfmReconstructParityShortDrive, ABlackFrameIsLostThenTrackingResumesInBoth)
 // A run of three black frames (2.4 m of driving, 11 degrees of turn with no image): tracking is
 // lost over the run and resumes after it (re-localisation against the last keyframes, the map
 // points searched around the constant-velocity prediction); both commands say where the gap
-// was, on stderr and in the run's JSON. (Four such frames are at the edge: 24 to 30 inliers after the gap, and six are too
-// many: the keyframes' patches no longer match, and the run reports the loss.)
+// was, on stderr and in the run's JSON. (Four such frames are at the edge: 24 to 30 inliers
+// after the gap; six are too many: the keyframes' patches no longer match, and the run reports
+// the loss.)
 TEST(SfmReconstructParityShortDrive, ARunOfBlackFramesIsAReportedGapThenTrackingResumes) {
   const fs::path scratch = ScratchDir("black_run");
   Cut cut;

@@ -113,11 +113,9 @@ struct Tracker::Impl {
     last_tracked.push_back({frame, world_from_rig});
     if (last_tracked.size() > 2) last_tracked.erase(last_tracked.begin());
   }
-  // Constant velocity: the motion between the last two tracked frames (when consecutive)
-  // applied once per frame from the last tracked one to `frame`; without a velocity, the last
-  // tracked pose and false.
-  // The constant-velocity prediction of `frame`'s pose from the last two tracked frames. When
-  // frames between those two were not tracked (a gap), the step per frame is the g-th root of
+  // Constant velocity: the step between the last two tracked frames applied once per frame
+  // from the last tracked one to `frame`; without a velocity, the last tracked pose and false.
+  // When frames between those two were not tracked (a gap), the step is the g-th root of
   // their relative motion (a constant screw motion: the rotation's angle over g, the
   // translation solving sum_i R^i t = t_between), up to kMaxPredictionGap frames apart.
   static constexpr int kMaxPredictionGap = 10;

@@ -200,6 +200,22 @@ class AbsolutePoseScorer {
   opengv::translations_t cam_offsets_;
 };
 
+// The model refined on its inliers (when more than a minimal sample) and its inliers selected
+// again; taken when the refinement is finite and keeps at least as many inliers. Whether it
+// was taken.
+inline bool RefineOnInliers(const AbsolutePoseScorer& scorer, double threshold, int sample_size,
+                            opengv::transformation_t* model, std::vector<int>* inliers) {
+  if (static_cast<int>(inliers->size()) <= sample_size) return false;
+  const opengv::transformation_t refined = scorer.Refine(*model, *inliers);
+  if (!refined.allFinite()) return false;
+  std::vector<int> refined_inliers;
+  scorer.Select(refined, threshold, &refined_inliers);
+  if (refined_inliers.size() < inliers->size()) return false;
+  *model = refined;
+  *inliers = std::move(refined_inliers);
+  return true;
+}
+
 // Hypotheses solved at once: never more than the iterations the adaptive stopping still
 // expects (so that a short run does not solve many extra samples), at least 2 (two cores).
 constexpr int kMaxHypothesisBatch = 16;
@@ -222,15 +238,8 @@ inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProb
     opengv::transformation_t candidate = prior->pose.ToMatrix();
     std::vector<int> inliers;
     scorer.Select(candidate, threshold, &inliers);
-    for (int round = 0;
-         round < 2 && options.refine && static_cast<int>(inliers.size()) > sample_size; ++round) {
-      const opengv::transformation_t refined = scorer.Refine(candidate, inliers);
-      if (!refined.allFinite()) break;
-      std::vector<int> refined_inliers;
-      scorer.Select(refined, threshold, &refined_inliers);
-      if (refined_inliers.size() < inliers.size()) break;
-      candidate = refined;
-      inliers = std::move(refined_inliers);
+    for (int round = 0; round < 2 && options.refine; ++round) {
+      if (!RefineOnInliers(scorer, threshold, sample_size, &candidate, &inliers)) break;
     }
     if (static_cast<int>(inliers.size()) >= std::max(min_inliers, prior->accept_inliers)) {
       result.success = true;
@@ -306,17 +315,7 @@ inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProb
 
   std::vector<int> inliers;
   scorer.Select(best_model, threshold, &inliers);
-  if (options.refine && static_cast<int>(inliers.size()) > sample_size) {
-    const opengv::transformation_t refined = scorer.Refine(best_model, inliers);
-    if (refined.allFinite()) {
-      std::vector<int> refined_inliers;
-      scorer.Select(refined, threshold, &refined_inliers);
-      if (refined_inliers.size() >= inliers.size()) {
-        best_model = refined;
-        inliers = std::move(refined_inliers);
-      }
-    }
-  }
+  if (options.refine) RefineOnInliers(scorer, threshold, sample_size, &best_model, &inliers);
   result.num_iterations = iterations;
   result.num_inliers = static_cast<int>(inliers.size());
   for (int index : inliers) result.inlier_mask[index] = 1;

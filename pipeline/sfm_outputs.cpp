@@ -38,10 +38,16 @@ SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
     for (const FinalizedPoint& point : keyframe.points)
       outputs.cloud.points.push_back(point.position);
   }
+  // sparse/ holds each point's complete track when the run has them (the same points in the
+  // same order); the colours are the mean over those observations.
+  bool complete = run.model_keyframes.size() == run.keyframes.size();
+  for (size_t k = 0; complete && k < run.keyframes.size(); ++k)
+    complete = run.model_keyframes[k].points.size() == run.keyframes[k].points.size();
+  const std::vector<FinalizedKeyframe>& model = complete ? run.model_keyframes : run.keyframes;
   // Point colours from the keyframe images (the SfM reads grey images only).
   outputs.cloud.colors = ColorPoints(
-      rig, run.keyframes, [&drive](int frame, int camera) { return drive.LoadRgb(frame, camera); },
-      {}, &outputs.colors);
+      rig, model, [&drive](int frame, int camera) { return drive.LoadRgb(frame, camera); }, {},
+      &outputs.colors);
   ColmapModelStats colmap;
   if (run.outcome != SfmOutcome::kNotInitialised) {
     // No map files without a map: the stats say what happened.
@@ -49,7 +55,7 @@ SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
     WriteTum(frame_poses, folder / "frame_poses.tum");
     WritePlyPoints(outputs.cloud, folder / "points.ply");
     colmap = WriteColmapTextModel(
-        rig, run.keyframes,
+        rig, model,
         [&drive](int frame, int camera) {
           return std::filesystem::relative(drive.ImagePath(frame, camera), drive.folder())
               .generic_string();

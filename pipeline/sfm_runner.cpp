@@ -294,6 +294,9 @@ SfmRunResult SfmRunner::Finish() {
       spdlog::warn("sfm: the final bundle adjustment failed; the map is kept as it was");
     }
   }
+  result.model_keyframes = s.tracker.FinalizedSnapshot(/*all_rays=*/true);
+  for (FinalizedKeyframe& keyframe : result.model_keyframes)
+    keyframe.frame = s.InputFrame(keyframe.frame);
   result.front = s.builder.StageTimings();
   result.back = s.tracker.StageTimings();
   result.seconds = SecondsSince(s.start);

@@ -109,6 +109,9 @@ enum class SfmOutcome {
 
 struct SfmRunResult {
   std::vector<FinalizedKeyframe> keyframes;  // every keyframe, in order, final poses and points
+  // The same keyframes and points with each point's complete track (Tracker::FinalizedSnapshot
+  // with all_rays), for sparse/.
+  std::vector<FinalizedKeyframe> model_keyframes;
   std::vector<SfmFrameRow> frames;
   std::vector<std::string> skipped;  // one message per unreadable frame
   std::vector<SfmLoopClosure> loop_closures;

@@ -219,7 +219,8 @@ struct Tracker::Impl {
   void FinalizeUpTo(int end);
   // The "keyframe finalised" event of keyframe k: its pose and the points handed over with it
   // (their rays from keyframes up to k).
-  FinalizedKeyframe MakeFinalized(int k, const std::vector<int>& handed_points) const;
+  FinalizedKeyframe MakeFinalized(int k, const std::vector<int>& handed_points,
+                                  bool all_rays = false) const;
 };
 
 FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& observations) {
@@ -697,7 +698,8 @@ void Tracker::Impl::LocalBundleAdjustment() {
   FinalizeUpTo(num_keyframes - options.num_free_keyframes);
 }
 
-FinalizedKeyframe Tracker::Impl::MakeFinalized(int k, const std::vector<int>& handed_points) const {
+FinalizedKeyframe Tracker::Impl::MakeFinalized(int k, const std::vector<int>& handed_points,
+                                               bool all_rays) const {
   const Keyframe& keyframe = keyframes[k];
   FinalizedKeyframe event;
   event.keyframe = k;
@@ -710,7 +712,7 @@ FinalizedKeyframe Tracker::Impl::MakeFinalized(int k, const std::vector<int>& ha
     finalized_point.position = points[p].position;
     for (const PointObservation& o : points[p].observations)
       // Rays of keyframes up to k only: the later ones can still move.
-      if (o.keyframe <= k)
+      if (o.keyframe <= k || all_rays)
         finalized_point.rays.push_back(
             {o.keyframe, keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera), o.camera,
              o.bearing});
@@ -1022,7 +1024,7 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust() {
   return summary;
 }
 
-std::vector<FinalizedKeyframe> Tracker::FinalizedSnapshot() const {
+std::vector<FinalizedKeyframe> Tracker::FinalizedSnapshot(bool all_rays) const {
   const Impl& m = *impl_;
   std::vector<FinalizedKeyframe> result;
   std::vector<std::vector<int>> created(m.keyframes.size());
@@ -1031,7 +1033,7 @@ std::vector<FinalizedKeyframe> Tracker::FinalizedSnapshot() const {
       created[m.points[p].handed_over_by].push_back(static_cast<int>(p));
   for (size_t k = 0; k < m.keyframes.size(); ++k)
     if (m.keyframes[k].finalized)
-      result.push_back(m.MakeFinalized(static_cast<int>(k), created[k]));
+      result.push_back(m.MakeFinalized(static_cast<int>(k), created[k], all_rays));
   return result;
 }
 

@@ -217,7 +217,10 @@ class Tracker {
   // Schur); observations found to be outliers are dropped.
   BundleAdjustmentSummary GlobalBundleAdjust();
   // The keyframes finalised so far, rebuilt from the current map (after a correction), in order.
-  std::vector<FinalizedKeyframe> FinalizedSnapshot() const;
+  // Each point's rays are those of keyframes up to the one that handed it over (the surface's
+  // contract, docs/design.md §7); with all_rays, every keyframe that observes it (its complete
+  // track, for a model of the whole map such as sparse/).
+  std::vector<FinalizedKeyframe> FinalizedSnapshot(bool all_rays = false) const;
 
  private:
   struct Impl;

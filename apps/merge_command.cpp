@@ -197,6 +197,13 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
                             {"rms_centre", overlap.rms_centre},
                             {"a_from_b", Sim3Json(overlap.a_from_b)},
                             {"verified", overlap.verified}};
+    if (overlap.kind == "revisit") {
+      entry["frame_a"] = overlap.frame_a;
+      entry["frame_b"] = overlap.frame_b;
+      entry["appearance_score"] = overlap.score;
+      entry["matches"] = overlap.matches;
+      entry["points_fused"] = overlap.point_pairs.size();
+    }
     if (!overlap.verified) entry["refusal"] = overlap.refusal;
     overlaps.push_back(entry);
   }
@@ -287,9 +294,10 @@ void RegisterMergeCommand(CLI::App& app, const GlobalOptions& global) {
   auto o = std::make_shared<MergeCommandOptions>();
   CLI::App* command = app.add_subcommand(
       "merge",
-      "Merge reconstructions of segments of a drive (reconstruct --frames A:B) into one map: "
-      "aligned on their shared frames in one pose graph, duplicate points fused, the surface "
-      "sculpted again; inputs that are missing or do not overlap are reported in merge.json");
+      "Merge reconstructions of segments of drives (reconstruct --frames A:B) into one map: "
+      "aligned on their shared frames and the places they revisit in one pose graph, duplicate "
+      "points fused, a global bundle adjustment, the surface sculpted again; inputs that are "
+      "missing or do not overlap are reported in merge.json");
   command->add_option("reconstructions", o->inputs, "Reconstruction folders (reconstruct --out)")
       ->required();
   command
@@ -303,9 +311,11 @@ void RegisterMergeCommand(CLI::App& app, const GlobalOptions& global) {
                    "An overlap is verified when at least this many shared frames agree with one "
                    "similarity")
       ->capture_default_str();
-  command->add_flag("--global-ba", o->merge.global_bundle_adjustment,
-                    "A global bundle adjustment of the merged map (one drive only; off: it "
-                    "made the poses worse on the SfM's own models, docs/figures.md F25)");
+  command->add_flag("!--no-revisits", o->merge.revisits.enabled,
+                    "Align on shared frames only (no place recognition between segments)");
+  command->add_flag("!--no-global-ba", o->merge.global_bundle_adjustment,
+                    "No global bundle adjustment of the merged map (it runs for the segments "
+                    "of one drive)");
   AddEnclosingOptions(command, &o->enclosing, &o->sculptor);
   AddCarvingOptions(command, &o->sculptor);
   AddObservedMeshOptions(command, &o->sculptor.observed);

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <deque>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <numeric>
 #include <unordered_map>
@@ -14,6 +15,8 @@
 #include "calib/drive.h"
 #include "calib/error.h"
 #include "calib/input_file.h"
+#include "sfm/harris.h"
+#include "sfm/loop_closure.h"
 
 namespace omni {
 namespace fs = std::filesystem;
@@ -178,27 +181,278 @@ struct UnionFind {
   std::vector<size_t> parent;
 };
 
-// The global bundle adjustment of a merged map of one drive (MergeOptions): keyframes are the
-// drive's merged keyframes, observations the points' tracks as bearings of the rig's cameras
-// (COLMAP camera id k is rig camera k-1, as sfm/colmap_model.h writes them).
-void AdjustMergedMap(const Rig& rig, const std::map<std::string, size_t>& frame_of_name,
+// The keyframes of a segment: their frames in order and, per keyframe, its image of each rig
+// camera (COLMAP camera id k is rig camera k-1; null when missing).
+struct SegmentKeyframes {
+  std::vector<size_t> frames;
+  std::vector<std::vector<const ColmapImage*>> images;
+};
+
+SegmentKeyframes KeyframesOf(const MergeSegment& segment) {
+  std::map<size_t, std::vector<const ColmapImage*>> by_frame;
+  for (const ColmapImage& image : segment.model.images) {
+    const std::optional<size_t> frame = FrameOfImage(segment, image.name);
+    const int camera = static_cast<int>(image.camera_id) - 1;
+    if (!frame || camera < 0 || camera >= static_cast<int>(segment.rig.NumCameras())) continue;
+    auto& cameras = by_frame[*frame];
+    cameras.resize(segment.rig.NumCameras(), nullptr);
+    cameras[camera] = &image;
+  }
+  SegmentKeyframes keyframes;
+  for (auto& [frame, cameras] : by_frame) {
+    keyframes.frames.push_back(frame);
+    keyframes.images.push_back(std::move(cameras));
+  }
+  return keyframes;
+}
+
+// The corners of an image that have a 3-D point, in pixels of the prepared image, and the points.
+void CornersWithPoints(const ColmapImage& image, double downscale,
+                       std::vector<Eigen::Vector2d>* corners, std::vector<uint32_t>* points) {
+  corners->clear();
+  points->clear();
+  for (const ColmapPoint2D& point : image.points2d) {
+    if (point.point3d_id < 0) continue;
+    corners->push_back(InputToPreparedPixel(point.xy - Eigen::Vector2d(0.5, 0.5), downscale));
+    points->push_back(static_cast<uint32_t>(point.point3d_id));
+  }
+}
+
+// Revisits between every two segments (MergeRevisitOptions). `aligned`: the segments the shared
+// frames already put in one frame (city_from_segment), for the drift bound; `drive_length`:
+// the merged drive's length in city units.
+std::vector<MergeOverlap> FindRevisits(const std::vector<MergeSegment>& segments,
+                                       const std::vector<bool>& aligned,
+                                       const std::vector<Sim3d>& city_from_segment,
+                                       double drive_length, const MergeRevisitOptions& options) {
+  const int count = static_cast<int>(segments.size());
+  std::map<std::string, std::unique_ptr<Drive>> drives;
+  for (const MergeSegment& segment : segments)
+    if (!drives.count(segment.drive))
+      drives[segment.drive] = std::make_unique<Drive>(Drive::Open(segment.drive));
+  std::vector<SegmentKeyframes> keyframes;
+  std::vector<std::unique_ptr<LoopDetector>> detectors;
+  std::vector<std::vector<PlaceDescriptor>> descriptors(count);
+  for (int s = 0; s < count; ++s) {
+    keyframes.push_back(KeyframesOf(segments[s]));
+    detectors.push_back(std::make_unique<LoopDetector>(segments[s].rig, options.loop.detection));
+    const Drive& drive = *drives.at(segments[s].drive);
+    for (size_t frame : keyframes[s].frames) {
+      std::vector<cv::Mat> images;
+      for (size_t c = 0; c < segments[s].rig.NumCameras(); ++c)
+        images.push_back(drive.LoadGray(frame, c));
+      descriptors[s].push_back(detectors[s]->Describe(images));
+      detectors[s]->Add(descriptors[s].back());
+    }
+  }
+  HarrisOptions prepare;
+  prepare.downscale = options.loop.prepared_downscale;
+  const auto prepared = [&](int s, size_t frame, int camera) {
+    return PrepareImage(drives.at(segments[s].drive)->LoadGray(frame, camera), prepare);
+  };
+  std::vector<MergeOverlap> revisits;
+  unsigned seed = options.seed;
+  for (int a = 0; a < count; ++a) {
+    for (int b = a + 1; b < count; ++b) {
+      const MergeSegment& sa = segments[a];
+      const MergeSegment& sb = segments[b];
+      const std::vector<int>& ring = detectors[a]->ring();
+      if (ring.size() != detectors[b]->ring().size() || ring.empty()) continue;
+      const bool same_drive = sa.drive == sb.drive;
+      std::unordered_map<uint32_t, Eigen::Vector3d> xyz_a, xyz_b;
+      for (const ColmapPoint3D& p : sa.model.points) xyz_a.emplace(p.id, p.xyz);
+      for (const ColmapPoint3D& p : sb.model.points) xyz_b.emplace(p.id, p.xyz);
+      std::vector<MergeOverlap> found;
+      int verified_candidates = 0, best_inliers = 0, best_matches = 0;
+      for (size_t kb = 0; kb < keyframes[b].frames.size(); ++kb) {
+        const size_t frame_b = keyframes[b].frames[kb];
+        if (same_drive && frame_b >= sa.first_frame && frame_b <= sa.last_frame) continue;
+        const std::vector<LoopCandidate> candidates = detectors[a]->QueryBest(
+            descriptors[b][kb], detectors[a]->size() + options.loop.detection.min_keyframe_gap,
+            options.candidates_per_keyframe);
+        for (const LoopCandidate& candidate : candidates) {
+          const size_t ka = static_cast<size_t>(candidate.keyframe);
+          const size_t frame_a = keyframes[a].frames[ka];
+          if (same_drive && ((frame_a >= sb.first_frame && frame_a <= sb.last_frame) ||
+                             std::abs(static_cast<long>(frame_a) - static_cast<long>(frame_b)) <
+                                 options.min_frame_gap))
+            continue;
+          // 3-D matches: b's ring camera i against a's ring camera i + shift.
+          std::vector<Eigen::Vector3d> points_b, points_a;
+          std::vector<std::pair<uint32_t, uint32_t>> pairs;  // (a, b)
+          const int n = static_cast<int>(ring.size());
+          for (int i = 0; i < n; ++i) {
+            const int camera_b = ring[i], camera_a = ring[(i + candidate.shift) % n];
+            const ColmapImage* image_b = keyframes[b].images[kb][camera_b];
+            const ColmapImage* image_a = keyframes[a].images[ka][camera_a];
+            if (!image_b || !image_a) continue;
+            std::vector<Eigen::Vector2d> corners_b, corners_a;
+            std::vector<uint32_t> ids_b, ids_a;
+            CornersWithPoints(*image_b, prepare.downscale, &corners_b, &ids_b);
+            CornersWithPoints(*image_a, prepare.downscale, &corners_a, &ids_a);
+            for (const auto& [i_b, i_a] : MatchCornersAllPairs(
+                     prepared(b, frame_b, camera_b), corners_b, prepared(a, frame_a, camera_a),
+                     corners_a, options.loop.matching)) {
+              const auto pb = xyz_b.find(ids_b[i_b]);
+              const auto pa = xyz_a.find(ids_a[i_a]);
+              if (pb == xyz_b.end() || pa == xyz_a.end()) continue;
+              points_b.push_back(pb->second);
+              points_a.push_back(pa->second);
+              pairs.emplace_back(ids_a[i_a], ids_b[i_b]);
+            }
+          }
+          MergeOverlap revisit;
+          revisit.a = a;
+          revisit.b = b;
+          revisit.kind = "revisit";
+          revisit.frame_a = frame_a;
+          revisit.frame_b = frame_b;
+          revisit.score = candidate.score;
+          revisit.matches = static_cast<int>(points_a.size());
+          ++verified_candidates;
+          if (revisit.matches < options.loop.min_inliers) continue;
+          const auto pose_a = sa.keyframe_poses.find(frame_a);
+          const auto pose_b = sb.keyframe_poses.find(frame_b);
+          if (pose_a == sa.keyframe_poses.end() || pose_b == sb.keyframe_poses.end()) continue;
+          std::vector<double> depths;
+          for (const Eigen::Vector3d& p : points_a)
+            depths.push_back((p - pose_a->second.world_from_rig.translation).norm());
+          std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
+          const double threshold = options.loop.inlier_depth_share * depths[depths.size() / 2];
+          std::vector<int> inliers;
+          revisit.a_from_b = EstimateSimilarityRansac(
+              points_b, points_a, threshold, options.loop.ransac_iterations, seed++, &inliers);
+          revisit.inliers = static_cast<int>(inliers.size());
+          if (revisit.inliers > best_inliers) {
+            best_inliers = revisit.inliers;
+            best_matches = revisit.matches;
+          }
+          if (revisit.inliers < options.loop.min_inliers ||
+              revisit.inliers < options.min_inlier_ratio * revisit.matches)
+            continue;
+          if (aligned[a] && aligned[b]) {
+            const Sim3d graph = city_from_segment[a].Inverse() * city_from_segment[b];
+            const Eigen::Vector3d centre = pose_b->second.world_from_rig.translation;
+            const double moved =
+                (revisit.a_from_b * centre - graph * centre).norm() * city_from_segment[a].scale;
+            const double turned =
+                RotationAngle(revisit.a_from_b.rotation * graph.rotation.conjugate());
+            if (moved > options.max_drift_share * drive_length ||
+                turned > options.max_rotation_deg * kDegree) {
+              spdlog::info(
+                  "merge: {} frame {} and {} frame {} look alike but would move by {:.2f} "
+                  "(turn {:.1f} deg): not a revisit",
+                  sb.folder.string(), frame_b, sa.folder.string(), frame_a, moved,
+                  turned / kDegree);
+              continue;
+            }
+          }
+          double sq = 0.0;
+          for (int i : inliers) {
+            sq += (revisit.a_from_b * points_b[i] - points_a[i]).squaredNorm();
+            revisit.point_pairs.push_back(pairs[i]);
+          }
+          revisit.rms_centre = std::sqrt(sq / inliers.size());
+          revisit.verified = true;
+          found.push_back(std::move(revisit));
+          break;  // one candidate per keyframe
+        }
+      }
+      if (found.empty()) {
+        // Reported when nothing else joins the two (MergeSegments drops it otherwise).
+        MergeOverlap none;
+        none.a = a;
+        none.b = b;
+        none.kind = "revisit";
+        none.inliers = best_inliers;
+        none.matches = best_matches;
+        none.refusal = verified_candidates == 0
+                           ? "no place of one looks like a place of the other"
+                           : std::to_string(verified_candidates) +
+                                 " places looked alike; at best " + std::to_string(best_inliers) +
+                                 " of " + std::to_string(best_matches) +
+                                 " 3-D matches agreed with one similarity (at least " +
+                                 std::to_string(options.loop.min_inliers) + " and half needed)";
+        revisits.push_back(std::move(none));
+        continue;
+      }
+      // The best revisits of different places (their frames min_frame_gap apart), so that a
+      // pair meeting in several places is tied at each.
+      std::sort(found.begin(), found.end(),
+                [](const MergeOverlap& x, const MergeOverlap& y) { return x.inliers > y.inliers; });
+      std::vector<MergeOverlap> kept;
+      for (MergeOverlap& revisit : found) {
+        if (kept.size() >= static_cast<size_t>(options.max_revisits_per_pair)) break;
+        const bool new_place = std::none_of(kept.begin(), kept.end(), [&](const MergeOverlap& x) {
+          return std::abs(static_cast<long>(x.frame_b) - static_cast<long>(revisit.frame_b)) <
+                 options.min_frame_gap;
+        });
+        if (new_place) kept.push_back(std::move(revisit));
+      }
+      for (MergeOverlap& revisit : kept) {
+        spdlog::info(
+            "merge: revisit: {} frame {} is {} frame {} (appearance {:.2f}, {} of {} "
+            "3-D matches agree)",
+            sb.folder.string(), revisit.frame_b, sa.folder.string(), revisit.frame_a, revisit.score,
+            revisit.inliers, revisit.matches);
+        revisits.push_back(std::move(revisit));
+      }
+    }
+  }
+  return revisits;
+}
+
+// Whether two rigs are the same calibration (the global adjustment takes one rig).
+bool SameRig(const Rig& a, const Rig& b) {
+  if (a.cameras.size() != b.cameras.size()) return false;
+  for (size_t c = 0; c < a.cameras.size(); ++c) {
+    const Camera& x = a.cameras[c];
+    const Camera& y = b.cameras[c];
+    if (x.model != y.model || x.width != y.width || x.height != y.height || x.params != y.params ||
+        !x.cam_from_rig.rotation.coeffs().isApprox(y.cam_from_rig.rotation.coeffs(), 1e-12) ||
+        (x.cam_from_rig.translation - y.cam_from_rig.translation).norm() > 1e-12)
+      return false;
+  }
+  return true;
+}
+
+// The global bundle adjustment of a merged map whose drives share one rig (MergeOptions):
+// keyframes are the drives' merged keyframes, observations the points' tracks as bearings of
+// the rig's cameras (COLMAP camera id k of a drive is its rig camera, renumbered by the merge
+// in the drives' order: `camera_base` per drive). `frame_of_name` per drive.
+void AdjustMergedMap(const Rig& rig,
+                     const std::vector<std::map<std::string, size_t>>& frame_of_name,
+                     const std::vector<uint32_t>& camera_base, bool several_drives,
                      BundleAdjustmentOptions::Mode mode, BundleAdjustmentOptions options,
                      MergeResult* result) {
-  MergedDrive& drive = result->drives.front();
   ColmapModel& model = result->model;
-  std::map<size_t, int> keyframe_of_frame;
+  std::vector<std::map<size_t, int>> keyframe_of_frame(result->drives.size());
   BundleAdjustmentProblem problem;
-  for (size_t k = 0; k < drive.keyframes.size(); ++k) {
-    keyframe_of_frame[drive.keyframe_frames[k]] = static_cast<int>(k);
-    problem.keyframes.push_back({drive.keyframes[k].world_from_rig, k < 2});
+  std::vector<Rigid3d> old_poses;
+  for (size_t d = 0; d < result->drives.size(); ++d) {
+    const MergedDrive& drive = result->drives[d];
+    for (size_t k = 0; k < drive.keyframes.size(); ++k) {
+      keyframe_of_frame[d][drive.keyframe_frames[k]] = static_cast<int>(problem.keyframes.size());
+      problem.keyframes.push_back(
+          {drive.keyframes[k].world_from_rig, problem.keyframes.size() < 2});
+      old_poses.push_back(drive.keyframes[k].world_from_rig);
+    }
   }
+  std::map<std::string, size_t> drive_of_label;
+  for (size_t d = 0; d < result->drives.size(); ++d) drive_of_label[result->drives[d].label] = d;
   std::unordered_map<uint32_t, std::pair<int, int>> keyframe_camera_of;  // image id -> both
   for (const ColmapImage& image : model.images) {
-    const auto frame = frame_of_name.find(fs::path(image.name).stem().string());
-    if (frame == frame_of_name.end()) continue;
-    const auto keyframe = keyframe_of_frame.find(frame->second);
-    const int camera = static_cast<int>(image.camera_id) - 1;
-    if (keyframe == keyframe_of_frame.end() || camera < 0 ||
+    size_t d = 0;
+    if (several_drives) {
+      const auto label = drive_of_label.find(image.name.substr(0, image.name.find('/')));
+      if (label == drive_of_label.end()) continue;
+      d = label->second;
+    }
+    const auto frame = frame_of_name[d].find(fs::path(image.name).stem().string());
+    if (frame == frame_of_name[d].end()) continue;
+    const auto keyframe = keyframe_of_frame[d].find(frame->second);
+    const int camera = static_cast<int>(image.camera_id) - static_cast<int>(camera_base[d]) - 1;
+    if (keyframe == keyframe_of_frame[d].end() || camera < 0 ||
         camera >= static_cast<int>(rig.NumCameras()))
       continue;
     keyframe_camera_of[image.id] = {keyframe->second, camera};
@@ -262,22 +516,25 @@ void AdjustMergedMap(const Rig& rig, const std::map<std::string, size_t>& frame_
   }
   // The keyframes' and images' new poses; every other frame follows the keyframe at or before
   // it.
-  std::vector<Rigid3d> correction(drive.keyframes.size());
-  for (size_t k = 0; k < drive.keyframes.size(); ++k) {
-    correction[k] =
-        problem.keyframes[k].world_from_rig * drive.keyframes[k].world_from_rig.Inverse();
-    drive.keyframes[k].world_from_rig = problem.keyframes[k].world_from_rig;
-  }
   for (ColmapImage& image : model.images) {
     const auto it = keyframe_camera_of.find(image.id);
     if (it == keyframe_camera_of.end()) continue;
     image.cam_from_world = rig.cameras[it->second.second].cam_from_rig *
                            problem.keyframes[it->second.first].world_from_rig.Inverse();
   }
-  for (size_t f = 0; f < drive.frames.size(); ++f) {
-    auto next = keyframe_of_frame.upper_bound(drive.frame_frames[f]);
-    const int k = next == keyframe_of_frame.begin() ? 0 : std::prev(next)->second;
-    drive.frames[f].world_from_rig = correction[k] * drive.frames[f].world_from_rig;
+  for (size_t d = 0; d < result->drives.size(); ++d) {
+    MergedDrive& drive = result->drives[d];
+    for (size_t k = 0; k < drive.keyframes.size(); ++k)
+      drive.keyframes[k].world_from_rig =
+          problem.keyframes[keyframe_of_frame[d].at(drive.keyframe_frames[k])].world_from_rig;
+    for (size_t f = 0; f < drive.frames.size(); ++f) {
+      const auto next = keyframe_of_frame[d].upper_bound(drive.frame_frames[f]);
+      if (keyframe_of_frame[d].empty()) break;
+      const int k = next == keyframe_of_frame[d].begin() ? keyframe_of_frame[d].begin()->second
+                                                         : std::prev(next)->second;
+      const Rigid3d correction = problem.keyframes[k].world_from_rig * old_poses[k].Inverse();
+      drive.frames[f].world_from_rig = correction * drive.frames[f].world_from_rig;
+    }
   }
 }
 
@@ -291,12 +548,27 @@ BundleAdjustmentOptions MergeOptions::DefaultGlobalAdjustment() {
   return options;
 }
 
+std::string MergeRevisitOptions::Check() const {
+  const std::string loop_check = loop.Check();
+  if (!loop_check.empty()) return "loop." + loop_check;
+  if (min_frame_gap < 0) return "min_frame_gap: expected 0 or more";
+  if (candidates_per_keyframe < 1) return "candidates_per_keyframe: expected 1 or more";
+  if (max_revisits_per_pair < 1) return "max_revisits_per_pair: expected 1 or more";
+  if (!(min_inlier_ratio >= 0.0 && min_inlier_ratio <= 1.0))
+    return "min_inlier_ratio: expected a share in [0, 1]";
+  if (!(max_drift_share > 0.0)) return "max_drift_share: expected > 0";
+  if (!(max_rotation_deg > 0.0)) return "max_rotation_deg: expected > 0";
+  return {};
+}
+
 std::string MergeOptions::Check() const {
   if (min_shared_frames < 2) return "min_shared_frames: expected 2 or more";
   if (!(max_rotation_residual_deg > 0.0)) return "max_rotation_residual_deg: expected > 0";
   if (!(max_centre_residual_share >= 0.0)) return "max_centre_residual_share: expected >= 0";
   if (!(min_centre_residual >= 0.0)) return "min_centre_residual: expected >= 0";
   if (!(corner_tolerance_px > 0.0)) return "corner_tolerance_px: expected > 0";
+  const std::string revisit = revisits.Check();
+  if (!revisit.empty()) return "revisits." + revisit;
   const std::string graph = pose_graph.Check();
   if (!graph.empty()) return "pose_graph." + graph;
   const std::string adjustment = bundle_adjustment.Check();
@@ -392,22 +664,53 @@ MergeResult MergeSegments(const std::vector<MergeSegment>& segments, const Merge
   for (int s = 1; s < count; ++s)
     if (segments[s].keyframe_poses.size() > segments[fixed].keyframe_poses.size()) fixed = s;
   result.fixed_segment = fixed;
-  std::vector<bool> reached(count, false);
-  std::deque<int> queue{fixed};
-  reached[fixed] = true;
-  while (!queue.empty()) {
-    const int s = queue.front();
-    queue.pop_front();
-    for (const MergeOverlap& overlap : result.overlaps) {
-      if (!overlap.verified || (overlap.a != s && overlap.b != s)) continue;
-      const int other = overlap.a == s ? overlap.b : overlap.a;
-      if (reached[other]) continue;
-      reached[other] = true;
-      result.city_from_segment[other] =
-          overlap.a == s ? result.city_from_segment[s] * overlap.a_from_b
-                         : result.city_from_segment[s] * overlap.a_from_b.Inverse();
-      queue.push_back(other);
+  std::vector<bool> reached;
+  const auto join = [&] {
+    reached.assign(count, false);
+    std::deque<int> queue{fixed};
+    reached[fixed] = true;
+    while (!queue.empty()) {
+      const int s = queue.front();
+      queue.pop_front();
+      for (const MergeOverlap& overlap : result.overlaps) {
+        if (!overlap.verified || (overlap.a != s && overlap.b != s)) continue;
+        const int other = overlap.a == s ? overlap.b : overlap.a;
+        if (reached[other]) continue;
+        reached[other] = true;
+        result.city_from_segment[other] =
+            overlap.a == s ? result.city_from_segment[s] * overlap.a_from_b
+                           : result.city_from_segment[s] * overlap.a_from_b.Inverse();
+        queue.push_back(other);
+      }
     }
+  };
+  join();
+  // Revisits between segments that share no frame, then the groups again (a revisit may join
+  // what no shared frame did).
+  if (options.revisits.enabled && count > 1) {
+    double drive_length = 0.0;  // of the aligned segments, in city units
+    for (int s = 0; s < count; ++s) {
+      if (!reached[s]) continue;
+      const StampedPose* previous = nullptr;
+      for (const auto& [frame, pose] : segments[s].keyframe_poses) {
+        if (previous)
+          drive_length +=
+              result.city_from_segment[s].scale *
+              (pose.world_from_rig.translation - previous->world_from_rig.translation).norm();
+        previous = &pose;
+      }
+    }
+    std::vector<MergeOverlap> revisits =
+        FindRevisits(segments, reached, result.city_from_segment, drive_length, options.revisits);
+    // A pair that found no revisit is reported only when no shared frame joins it either.
+    const auto has_shared_frames = [&](int a, int b) {
+      return std::any_of(result.overlaps.begin(), result.overlaps.end(),
+                         [&](const MergeOverlap& x) { return x.a == a && x.b == b; });
+    };
+    for (MergeOverlap& revisit : revisits)
+      if (revisit.verified || !has_shared_frames(revisit.a, revisit.b))
+        result.overlaps.push_back(std::move(revisit));
+    join();
   }
   for (int s = 0; s < count; ++s) {
     result.merged[s] = reached[s];
@@ -530,11 +833,25 @@ MergeResult MergeSegments(const std::vector<MergeSegment>& segments, const Merge
   // (segment, image id, 2D index) -> (merged image, corner index), for the tracks.
   std::vector<std::unordered_map<uint64_t, std::pair<size_t, size_t>>> corner_of(count);
   const double tolerance_sq = options.corner_tolerance_px * options.corner_tolerance_px;
+  std::vector<std::unordered_map<uint32_t, size_t>> nodes_of(count);  // point3d id -> node
   for (int s = 0; s < count; ++s) {
     if (!result.merged[s]) continue;
-    std::unordered_map<uint32_t, size_t> node_of;  // point3d id -> node
     for (size_t p = 0; p < segments[s].model.points.size(); ++p)
-      node_of[segments[s].model.points[p].id] = point_offset[s] + p;
+      nodes_of[s][segments[s].model.points[p].id] = point_offset[s] + p;
+  }
+  // The points a revisit matched are one.
+  for (const MergeOverlap& overlap : result.overlaps) {
+    if (!overlap.verified || !result.merged[overlap.a] || !result.merged[overlap.b]) continue;
+    for (const auto& [point_a, point_b] : overlap.point_pairs) {
+      const auto node_a = nodes_of[overlap.a].find(point_a);
+      const auto node_b = nodes_of[overlap.b].find(point_b);
+      if (node_a != nodes_of[overlap.a].end() && node_b != nodes_of[overlap.b].end())
+        classes.Join(node_a->second, node_b->second);
+    }
+  }
+  for (int s = 0; s < count; ++s) {
+    if (!result.merged[s]) continue;
+    const std::unordered_map<uint32_t, size_t>& node_of = nodes_of[s];
     for (const ColmapImage& image : segments[s].model.images) {
       const size_t merged = image_index.at(merged_name(segments[s], image.name));
       std::vector<Corner>& image_corners = corners[merged];
@@ -637,26 +954,40 @@ MergeResult MergeSegments(const std::vector<MergeSegment>& segments, const Merge
     result.drives.push_back(std::move(merged));
   }
 
+  // One rig for the adjustment: every merged drive's must be the same calibration.
+  std::vector<int> drive_segment;  // a merged segment of each drive
+  for (const MergedDrive& drive : result.drives)
+    for (int s = 0; s < count; ++s)
+      if (result.merged[s] && segments[s].drive == drive.folder) {
+        drive_segment.push_back(s);
+        break;
+      }
+  bool one_rig = true;
+  for (int s : drive_segment) one_rig = one_rig && SameRig(segments[s].rig, segments[fixed].rig);
+  size_t observations = 0;
+  for (const ColmapPoint3D& point : result.model.points) observations += point.track.size();
   if (!options.global_bundle_adjustment) {
     result.adjustment_skipped = "off";
-  } else if (result.drives.size() != 1) {
-    result.adjustment_skipped = "the segments are of several drives";
+  } else if (!one_rig) {
+    result.adjustment_skipped = "the drives have different rigs";
+  } else if (observations > options.max_adjusted_observations) {
+    result.adjustment_skipped = std::to_string(observations) + " observations, above " +
+                                std::to_string(options.max_adjusted_observations);
   } else {
-    size_t observations = 0;
-    for (const ColmapPoint3D& point : result.model.points) observations += point.track.size();
-    if (observations > options.max_adjusted_observations) {
-      result.adjustment_skipped = std::to_string(observations) + " observations, above " +
-                                  std::to_string(options.max_adjusted_observations);
-    } else {
-      const auto start = std::chrono::steady_clock::now();
-      const MergeSegment& reference = segments[fixed];
-      AdjustMergedMap(reference.rig, reference.frame_of_name,
-                      reference.mode == "central" ? BundleAdjustmentOptions::Mode::kCentral
-                                                  : BundleAdjustmentOptions::Mode::kNonCentral,
-                      options.bundle_adjustment, &result);
-      result.adjustment_seconds =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const auto start = std::chrono::steady_clock::now();
+    std::vector<std::map<std::string, size_t>> frame_of_name;
+    std::vector<uint32_t> camera_base;
+    for (int s : drive_segment) {
+      frame_of_name.push_back(segments[s].frame_of_name);
+      camera_base.push_back(
+          camera_of.at({segments[s].drive, segments[s].model.cameras.front().id}) - 1);
     }
+    AdjustMergedMap(segments[fixed].rig, frame_of_name, camera_base, result.drives.size() > 1,
+                    segments[fixed].mode == "central" ? BundleAdjustmentOptions::Mode::kCentral
+                                                      : BundleAdjustmentOptions::Mode::kNonCentral,
+                    options.bundle_adjustment, &result);
+    result.adjustment_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   return result;
 }

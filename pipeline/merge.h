@@ -22,9 +22,37 @@
 #include "calib/rig.h"
 #include "calib/tum.h"
 #include "sfm/bundle_adjustment.h"
+#include "sfm/loop_closure.h"
 #include "sfm/pose_graph.h"
 
 namespace omni {
+
+// Revisits between segments that share no frame (a drive's loop cut into segments, two drives
+// through one street): the loop closer's place recognition (sfm/loop_closure.h) over the
+// segments' keyframes, then all-pairs ZNCC matching of the keyframes' corners that have a 3-D
+// point and a similarity of those points in RANSAC.
+struct MergeRevisitOptions {
+  bool enabled = true;
+  // Thumbnails, ring, minimum appearance score; ZNCC matching; images prepared at
+  // prepared_downscale; RANSAC iterations; inlier_depth_share; min_inliers.
+  LoopClosureOptions loop;
+  // Of one drive, keyframes closer than this many frames are not a revisit (the segments'
+  // shared frames align those), nor are frames inside the querying segment's own range.
+  int min_frame_gap = 30;
+  int candidates_per_keyframe = 2;  // verified per keyframe, best appearance first
+  // Revisits kept per pair of segments, most inliers first, each of another place (their
+  // frames in the querying segment min_frame_gap apart).
+  int max_revisits_per_pair = 3;
+  double min_inlier_ratio = 0.5;    // similarity inliers over the 3-D matches
+  // When the shared frames already align the two segments: the revisit's similarity must move
+  // the revisiting keyframe by at most this share of the merged drive's length and turn it by
+  // at most max_rotation_deg (drift, not a look-alike place).
+  double max_drift_share = 0.1;
+  double max_rotation_deg = 5.0;
+  unsigned seed = 1;
+
+  std::string Check() const;
+};
 
 struct MergeOptions {
   // A verified overlap has at least this many shared frames that agree with the similarity.
@@ -38,13 +66,13 @@ struct MergeOptions {
   // Two 2-D points of one image closer than this (pixels) are one corner (the SfM detects the
   // same corners in the same image).
   double corner_tolerance_px = 0.25;
+  MergeRevisitOptions revisits;
   PoseGraphOptions pose_graph;
   // Then a global bundle adjustment of the merged map (every keyframe and point, the first two
   // keyframes fixed), when the segments are of one drive and the map has at most this many
-  // observations; the other frames follow their nearest keyframe. Off: on the sparse/ models
-  // the SfM writes (without the observations its loop closures merged) it moved the poses
-  // away from the truth (docs/figures.md F25).
-  bool global_bundle_adjustment = false;
+  // observations; the other frames follow their nearest keyframe. It needs complete tracks
+  // in sparse/ (as the SfM writes them, docs/design.md §6).
+  bool global_bundle_adjustment = true;
   size_t max_adjusted_observations = 3000000;
   BundleAdjustmentOptions bundle_adjustment = DefaultGlobalAdjustment();
   static BundleAdjustmentOptions DefaultGlobalAdjustment();
@@ -74,8 +102,14 @@ std::optional<MergeSegment> LoadMergeSegment(const std::filesystem::path& folder
 // An overlap between two segments and how it was verified.
 struct MergeOverlap {
   int a = 0, b = 0;  // segment indices
-  std::string kind;  // "shared frames"
+  std::string kind;  // "shared frames" or "revisit"
   int shared_frames = 0, inliers = 0;
+  // A revisit: the keyframes' frames (a's and b's), the appearance score, the 3-D matches, and
+  // the point pairs (a's point id, b's) of the inliers, which the merge fuses.
+  size_t frame_a = 0, frame_b = 0;
+  double score = 0.0;
+  int matches = 0;
+  std::vector<std::pair<uint32_t, uint32_t>> point_pairs;
   double rms_rotation_deg = 0.0, rms_centre = 0.0;  // over the inliers, in a's units
   Sim3d a_from_b;
   bool verified = false;

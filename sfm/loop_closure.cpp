@@ -263,13 +263,9 @@ bool LoopWithinReach(const std::vector<Rigid3d>& world_from_rig, int then, int n
   return distance <= options.max_drift_share * path + options.revisit_reach_keyframes * step;
 }
 
-namespace {
-
-// The similarity then_from_now (three-point Umeyama samples in RANSAC, refit on the inliers):
-// inliers closer than `threshold`.
-Sim3d EstimateSimilarity(const std::vector<Eigen::Vector3d>& src,
-                         const std::vector<Eigen::Vector3d>& dst, double threshold, int iterations,
-                         unsigned seed, std::vector<int>* inliers_out) {
+Sim3d EstimateSimilarityRansac(const std::vector<Eigen::Vector3d>& src,
+                               const std::vector<Eigen::Vector3d>& dst, double threshold,
+                               int iterations, unsigned seed, std::vector<int>* inliers_out) {
   std::mt19937 rng(seed);
   std::uniform_int_distribution<size_t> pick(0, src.size() - 1);
   auto inliers_of = [&](const Sim3d& s) {
@@ -300,8 +296,6 @@ Sim3d EstimateSimilarity(const std::vector<Eigen::Vector3d>& src,
   return refit;
 }
 
-}  // namespace
-
 LoopVerification VerifyLoop(const Rig& rig, const std::vector<int>& ring, int shift,
                             const LoopMatches& matches,
                             const std::vector<Rigid3d>& world_from_keyframe, int then, int now,
@@ -326,8 +320,8 @@ LoopVerification VerifyLoop(const Rig& rig, const std::vector<int>& ring, int sh
   std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
   const double threshold = options.inlier_depth_share * depths[depths.size() / 2];
   std::vector<int> inliers;
-  v.similarity = EstimateSimilarity(matches.points_now, matches.points_then, threshold,
-                                    options.ransac_iterations, seed, &inliers);
+  v.similarity = EstimateSimilarityRansac(matches.points_now, matches.points_then, threshold,
+                                          options.ransac_iterations, seed, &inliers);
   v.similarity_inliers = static_cast<int>(inliers.size());
   if (v.similarity_inliers < options.min_inliers) return refuse("similarity: too few inliers");
   v.drift_share = LoopDriftShare(world_from_keyframe, then, now, v.similarity);
@@ -433,6 +427,15 @@ std::vector<std::pair<int, int>> MatchWindows(const WindowMatrix& windows1,
 
 }  // namespace
 
+std::vector<std::pair<int, int>> MatchCornersAllPairs(const cv::Mat& image1,
+                                                      const std::vector<Eigen::Vector2d>& corners1,
+                                                      const cv::Mat& image2,
+                                                      const std::vector<Eigen::Vector2d>& corners2,
+                                                      const ZnccOptions& options) {
+  return MatchWindows(NormalisedWindows(image1, corners1, options.half_window),
+                      NormalisedWindows(image2, corners2, options.half_window), options);
+}
+
 LoopMatches LoopCloser::Match(const KeyframeData& now, const KeyframeData& then, int shift,
                               const Tracker& tracker, int now_keyframe, int then_keyframe) const {
   LoopMatches matches;
@@ -442,11 +445,9 @@ LoopMatches LoopCloser::Match(const KeyframeData& now, const KeyframeData& then,
   for (int i = 0; i < n; ++i) {
     const int a = ring[i], b = ring[(i + shift) % n];
     if (now.prepared[a].empty() || then.prepared[b].empty()) continue;
-    const WindowMatrix windows_now =
-        NormalisedWindows(now.prepared[a], now.corners[a], options_.matching.half_window);
-    const WindowMatrix windows_then =
-        NormalisedWindows(then.prepared[b], then.corners[b], options_.matching.half_window);
-    for (const auto& [i_now, i_then] : MatchWindows(windows_now, windows_then, options_.matching)) {
+    for (const auto& [i_now, i_then] :
+         MatchCornersAllPairs(now.prepared[a], now.corners[a], then.prepared[b], then.corners[b],
+                              options_.matching)) {
       matches.bearings_now.push_back(now.bearings[a][i_now]);
       matches.bearings_then.push_back(then.bearings[b][i_then]);
       matches.cameras_now.push_back(a);

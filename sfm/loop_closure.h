@@ -158,6 +158,23 @@ struct LoopVerification {
   double drift_share = 0.0;            // LoopDriftShare of the similarity
 };
 
+// The similarity dst ≈ S src of matched 3-D points: three-point Umeyama samples in RANSAC
+// (`iterations`, seeded), refit on the inliers (closer than `threshold`), whose indices go to
+// *inliers (fewer than 3: identity, no inliers).
+Sim3d EstimateSimilarityRansac(const std::vector<Eigen::Vector3d>& src,
+                               const std::vector<Eigen::Vector3d>& dst, double threshold,
+                               int iterations, unsigned seed, std::vector<int>* inliers);
+
+// All-against-all ZNCC matches (index1, index2) between the corners of two prepared images
+// (pixels of those images), with the checks of ZnccOptions (minimum score, distinctiveness
+// ratio, mutual best): one matrix product of their normalised windows. What the loop closer
+// matches a revisit with, and `merge` two segments' keyframes.
+std::vector<std::pair<int, int>> MatchCornersAllPairs(const cv::Mat& image1,
+                                                      const std::vector<Eigen::Vector2d>& corners1,
+                                                      const cv::Mat& image2,
+                                                      const std::vector<Eigen::Vector2d>& corners2,
+                                                      const ZnccOptions& options);
+
 // The geometric verification of a candidate, cheapest first: the 3-D similarity in RANSAC and
 // the drift bound (max_drift_share), the relative pose of the rig (inliers and ratio) and the
 // ring shift it implies against the appearance's `shift`, and their rotations' agreement.

@@ -12,6 +12,7 @@
 #include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
+#include "eval/pose_eval.h"
 #include "tests/apps/reconstruction_checks.h"
 #include "tests/apps/run_omnisculpt.h"
 #include "tests/apps/short_drive.h"
@@ -53,7 +54,7 @@ TEST(MergeCommandShortDrive, RefusesABadFrameRangeAndNothingToMerge) {
 
 // Two overlapping segments of the drive's first 90 frames (no loop), merged, against one run
 // over frames 0-89; a third input that does not exist is reported and the others merged; a
-// segment that shares no frame with them is reported as not joined.
+// segment that shares no frame with them and sees no place they saw is reported as not joined.
 TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   const fs::path scratch = ScratchDir("segments");
   std::string error;
@@ -68,7 +69,7 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   reconstruct("0:50", "a");
   reconstruct("40:90", "b");
   reconstruct("0:90", "whole");
-  reconstruct("110:", "apart");
+  reconstruct("95:110", "apart");
   // The segment's frames keep the drive's names and times.
   const nlohmann::json b = ReadJson(scratch / "b" / "reconstruct.json");
   EXPECT_EQ(b["frame_range"]["first"], 40);
@@ -89,13 +90,26 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   EXPECT_EQ(summary["status"], "partial") << summary.dump(2);
   ASSERT_EQ(summary["missing"].size(), 1u);
   EXPECT_EQ(summary["missing"][0]["folder"], (scratch / "missing").string());
-  // a and b: 10 shared frames, verified; apart shares none and is not merged.
-  ASSERT_EQ(summary["overlaps"].size(), 1u) << summary.dump(2);
-  const nlohmann::json& overlap = summary["overlaps"][0];
-  EXPECT_TRUE(overlap["verified"].get<bool>());
-  EXPECT_EQ(overlap["shared_frames"], 10);
-  EXPECT_GE(overlap["inliers"].get<int>(), 8);
-  EXPECT_LT(overlap["rms_rotation_deg"].get<double>(), 0.3);
+  // a and b: 10 shared frames, verified; apart shares none, revisits nothing, and is not
+  // merged: each of its pairs is reported with why.
+  int shared = 0, refused = 0;
+  for (const nlohmann::json& overlap : summary["overlaps"]) {
+    const bool with_apart = overlap["b"] == (scratch / "apart").string();
+    if (with_apart) {
+      EXPECT_FALSE(overlap["verified"].get<bool>()) << overlap.dump();
+      EXPECT_FALSE(overlap["refusal"].get<std::string>().empty());
+      ++refused;
+      continue;
+    }
+    ASSERT_EQ(overlap["kind"], "shared frames") << overlap.dump();
+    ++shared;
+    EXPECT_TRUE(overlap["verified"].get<bool>());
+    EXPECT_EQ(overlap["shared_frames"], 10);
+    EXPECT_GE(overlap["inliers"].get<int>(), 8);
+    EXPECT_LT(overlap["rms_rotation_deg"].get<double>(), 0.3);
+  }
+  EXPECT_EQ(shared, 1) << summary.dump(2);
+  EXPECT_EQ(refused, 2) << summary.dump(2);
   ASSERT_EQ(summary["inputs"].size(), 3u);
   EXPECT_TRUE(summary["inputs"][0]["merged"].get<bool>());
   EXPECT_TRUE(summary["inputs"][1]["merged"].get<bool>());
@@ -133,6 +147,106 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   const auto again = RunOmnisculpt(
       {"--quiet", "merge", (scratch / "a").string(), "--out", city.string()}, scratch);
   EXPECT_EQ(again.exit_code, 2) << again.err;
+}
+
+// The drive's loop cut into two segments whose only link at the loop is a revisit (frames
+// 113-129 see the place of frames 0-13): the merge finds it, fuses the matched points, and the
+// merged map is as good as one run that closed the loop itself.
+TEST(MergeCommandShortDrive, ALoopCutIntoSegmentsClosesInTheMerge) {
+  const fs::path scratch = ScratchDir("loop");
+  std::string error;
+  const fs::path drive = testing::ShortDrive(&error);
+  ASSERT_FALSE(drive.empty()) << error;
+  for (const auto& [range, name] :
+       {std::pair<std::string, std::string>{"0:70", "first"}, {"55:", "second"}, {"0:", "whole"}}) {
+    const auto result = RunOmnisculpt({"--quiet", "reconstruct", drive.string(), "--frames", range,
+                                       "--out", (scratch / name).string()},
+                                      scratch);
+    ASSERT_EQ(result.exit_code, 0) << range << ": " << result.err;
+  }
+  const nlohmann::json whole = ReadJson(scratch / "whole" / "reconstruct.json");
+  ASSERT_FALSE(whole["loop_closures"].empty()) << "the single run closes the loop itself";
+  const fs::path city = scratch / "city";
+  const auto merged = RunOmnisculpt({"--quiet", "merge", (scratch / "first").string(),
+                                     (scratch / "second").string(), "--out", city.string()},
+                                    scratch);
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  const nlohmann::json summary = ReadJson(city / "merge.json");
+  EXPECT_EQ(summary["status"], "usable");
+  int revisits = 0;
+  for (const nlohmann::json& overlap : summary["overlaps"]) {
+    if (overlap["kind"] != "revisit") continue;
+    ++revisits;
+    EXPECT_TRUE(overlap["verified"].get<bool>());
+    // The second segment's end sees the first's start.
+    EXPECT_GE(overlap["frame_b"].get<int>(), 105) << overlap.dump();
+    EXPECT_LE(overlap["frame_a"].get<int>(), 25) << overlap.dump();
+  }
+  EXPECT_GE(revisits, 1) << summary.dump(2);
+  EXPECT_TRUE(summary["global_bundle_adjustment"]["ran"].get<bool>());
+  const double merged_rms = PoseRms(city, drive);
+  const double whole_rms = PoseRms(scratch / "whole", drive);
+  std::printf("keyframe RMS: merged %.2f cm, one run closing the loop %.2f cm\n", 100 * merged_rms,
+              100 * whole_rms);
+  EXPECT_LE(merged_rms, 1.5 * whole_rms + 0.003);
+  EXPECT_TRUE(summary["manifold"].get<bool>());
+  EXPECT_TRUE(summary["closed_manifold"].get<bool>());
+}
+
+// Two drives through the same streets (a second drive made of the first one's images, so it
+// is another drive to the merge: no frame is shared): only place recognition can join them; each
+// drive keeps its own poses file, and together they make one trajectory.
+TEST(MergeCommandShortDrive, TwoDrivesAreJoinedWhereTheyPassTheSamePlaces) {
+  const fs::path scratch = ScratchDir("two_drives");
+  std::string error;
+  const fs::path drive = testing::ShortDrive(&error);
+  ASSERT_FALSE(drive.empty()) << error;
+  const fs::path other = scratch / "other_drive";
+  fs::create_directories(other);
+  fs::create_directory_symlink(drive / "images", other / "images");
+  fs::copy_file(drive / "rig.json", other / "rig.json");
+  const auto reconstruct = [&](const fs::path& folder, const std::string& range,
+                               const std::string& name) {
+    const auto result = RunOmnisculpt({"--quiet", "reconstruct", folder.string(), "--frames", range,
+                                       "--out", (scratch / name).string()},
+                                      scratch);
+    ASSERT_EQ(result.exit_code, 0) << range << ": " << result.err;
+  };
+  reconstruct(drive, "0:70", "first");
+  reconstruct(other, "50:", "second");
+  const fs::path city = scratch / "city";
+  const auto merged = RunOmnisculpt({"--quiet", "merge", (scratch / "first").string(),
+                                     (scratch / "second").string(), "--out", city.string()},
+                                    scratch);
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  const nlohmann::json summary = ReadJson(city / "merge.json");
+  EXPECT_EQ(summary["status"], "usable") << summary.dump(2);
+  ASSERT_EQ(summary["drives"].size(), 2u);
+  int revisits = 0;
+  for (const nlohmann::json& overlap : summary["overlaps"]) {
+    EXPECT_EQ(overlap["kind"], "revisit") << overlap.dump();
+    if (overlap["verified"].get<bool>()) ++revisits;
+  }
+  EXPECT_GE(revisits, 1) << summary.dump(2);
+  // One rig for both: adjusted together.
+  EXPECT_TRUE(summary["global_bundle_adjustment"]["ran"].get<bool>()) << summary.dump(2);
+  EXPECT_FALSE(fs::exists(city / "poses.tum"));
+  // One trajectory: the first drive's frames 0-69 then the second's 70-129, against the truth.
+  const std::string first_label = summary["drives"][0]["label"];
+  const std::string second_label = summary["drives"][1]["label"];
+  std::vector<StampedPose> joined;
+  for (const StampedPose& pose : ReadTum(city / "drives" / first_label / "poses.tum"))
+    if (pose.timestamp < 70.0 / 15.0 - 1e-6) joined.push_back(pose);
+  for (const StampedPose& pose : ReadTum(city / "drives" / second_label / "poses.tum"))
+    if (pose.timestamp >= 70.0 / 15.0 - 1e-6) joined.push_back(pose);
+  const PoseEvalResult evaluation = EvaluatePoses(joined, ReadTum(drive / "gt" / "poses.tum"));
+  std::printf("two drives joined: keyframe RMS %.2f cm over %zu keyframes\n",
+              100 * evaluation.registration_rms, joined.size());
+  EXPECT_GT(joined.size(), 50u);
+  EXPECT_LT(evaluation.registration_rms, 0.05);  // 5 cm: 0.05 % of the 103 m driven
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  EXPECT_TRUE(CheckMesh(ReadPlyMesh(city / "surface.ply"), bounded).ok);
 }
 
 }  // namespace

@@ -1,7 +1,10 @@
 // MergeSegments (pipeline/merge.h) on segments made in memory from one known trajectory: the
 // similarity between two segments is recovered from their shared frames, their images and
 // frames appear once, the points seen at one corner of a shared image are fused, and a segment
-// whose shared frames disagree is refused and left out.
+// whose shared frames disagree is refused and left out. These segments have no images on disk:
+// the revisit search (tested on a real drive in tests/apps/merge_command_test.cpp) and the
+// global adjustment are off.
+
 
 #include "pipeline/merge.h"
 
@@ -13,6 +16,13 @@
 
 namespace omni {
 namespace {
+MergeOptions InMemoryOptions() {
+  MergeOptions options;
+  options.revisits.enabled = false;
+  options.global_bundle_adjustment = false;
+  return options;
+}
+
 
 // A curved drive: frame f at (f, 0.05 f², 0), turning about z.
 Rigid3d TrueWorldFromRig(size_t f) {
@@ -76,7 +86,7 @@ TEST(MergeSegments, RecoversTheSimilarityAndFusesTheSharedCorners) {
   std::vector<MergeSegment> segments = {MakeSegment(0, 14, a_from_true, "a"),
                                         MakeSegment(8, 25, b_from_true, "b")};
   // b has more keyframes: it is the fixed one, the city is b's world.
-  const MergeResult result = MergeSegments(segments, MergeOptions());
+  const MergeResult result = MergeSegments(segments, InMemoryOptions());
   ASSERT_EQ(result.overlaps.size(), 1u);
   const MergeOverlap& overlap = result.overlaps[0];
   EXPECT_TRUE(overlap.verified) << overlap.refusal;
@@ -131,7 +141,7 @@ TEST(MergeSegments, ASegmentWhoseSharedFramesDisagreeIsLeftOut) {
   // c's shared frames scattered: no similarity fits 5 of them.
   for (auto& [frame, pose] : segments[1].frame_poses)
     pose.world_from_rig.translation += Eigen::Vector3d(0, 0, (frame % 2 ? 1.0 : -1.0) * frame);
-  const MergeResult result = MergeSegments(segments, MergeOptions());
+  const MergeResult result = MergeSegments(segments, InMemoryOptions());
   ASSERT_EQ(result.overlaps.size(), 1u);
   EXPECT_FALSE(result.overlaps[0].verified);
   EXPECT_NE(result.overlaps[0].refusal.find("agree with one similarity"), std::string::npos)

@@ -34,9 +34,10 @@ command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
 command -v chromium >/dev/null 2>&1 || packages+=(chromium fonts-liberation)
 # Test-only: the cluster test (tests/slurm/) starts a one-node Slurm cluster on localhost
-# (scripts/slurm/local_cluster.sh): slurmctld, slurmd, the client commands and munged.
+# (scripts/slurm/local_cluster.sh): slurmctld, slurmd, the client commands and munged; python3
+# reads the evaluations there.
 if [ "$test_packages" = 1 ]; then
-  packages+=(slurm-wlm slurmctld slurmd slurm-client munge)
+  packages+=(slurm-wlm slurmctld slurmd slurm-client munge python3)
 fi
 
 missing=()

@@ -90,12 +90,12 @@ frames="$(find "$camera_folder" -maxdepth 1 -type f \( -iname '*.png' -o -iname 
 # Segment k: [a_k, b_k), a_k = floor(k (N - F) / K), b_k = floor((k + 1) (N - F) / K) + F.
 [ "$overlap" -lt "$frames" ] || die "--overlap $overlap: the drive has only $frames frames"
 stride_frames=$(((frames - overlap) / segments))
+[ "$stride_frames" -ge 1 ] || die "--segments $segments: too many for $frames frames overlapping by $overlap"
 if [ "$segments" -gt 1 ]; then
   [ "$overlap" -ge 1 ] || die "--overlap 0: neighbouring segments must share frames for the merge to align them"
   [ "$overlap" -le "$stride_frames" ] ||
     die "--overlap $overlap: too large for $segments segments of $frames frames (at most $stride_frames, the stride; each segment would be $((stride_frames + overlap)) frames and overlap more than its neighbours)"
 fi
-[ "$stride_frames" -ge 1 ] || die "--segments $segments: too many for $frames frames"
 
 # The executable, as an absolute path the nodes can run.
 if [ -z "$omnisculpt" ]; then

@@ -41,19 +41,28 @@ wait_limit="${OMNI_SLURM_TEST_WAIT:-2400}"
 cores="$(nproc)"
 cpus_per_task="${OMNI_SLURM_TEST_CPUS_PER_TASK:-$([ "$cores" -ge 8 ] && echo 2 || echo 1)}"
 
+# A cluster left running by an earlier run that was killed (ctest's timeout) is stopped first.
+if [ -f "$work/cluster_dir" ]; then
+  stale="$(cat "$work/cluster_dir")"
+  if [ -d "$stale" ]; then
+    bash "$scripts/local_cluster.sh" stop "$stale" || true
+    rm -rf "$stale"
+  fi
+fi
 rm -rf "$work"
 mkdir -p "$work" || fail "$work: cannot make the folder"
 work="$(cd "$work" && pwd)"
 # The cluster's own folder: short (the MUNGE socket path must fit a Unix socket address) and
 # private to this run.
 cluster="$(mktemp -d "${TMPDIR:-/tmp}/omni-slurm-test.XXXXXX")" || fail "cannot make a temporary folder"
+echo "$cluster" >"$work/cluster_dir"
 
 cleanup() {
   local code=$?
   bash "$scripts/local_cluster.sh" stop "$cluster" || echo "$me: warning: the cluster in $cluster did not stop cleanly"
   mkdir -p "$work/cluster_logs"
   cp "$cluster"/log/* "$cluster/slurm.conf" "$work/cluster_logs/" 2>/dev/null || true
-  rm -rf "$cluster"
+  rm -rf "$cluster" "$work/cluster_dir"
   exit "$code"
 }
 trap cleanup EXIT

@@ -99,6 +99,7 @@ int RunCommandLine(int argc, char** argv) {
   RegisterSurfaceCommand(app, global);
   RegisterEvalCommands(app, global);
   RegisterReconstructCommand(app, global);
+  RegisterMergeCommand(app, global);
   RegisterViewCommand(app, global);
   RegisterExportCommand(app, global);
 

@@ -45,6 +45,7 @@ void RegisterEvalCommands(CLI::App& app, const GlobalOptions& global);
 void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterSfmCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global);
+void RegisterMergeCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterViewCommand(CLI::App& app, const GlobalOptions& global);
 void RegisterExportCommand(CLI::App& app, const GlobalOptions& global);
 

@@ -239,6 +239,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       final_ba && result.loop_replay_seconds.size() > sfm.loop_closures.size()
           ? result.loop_replay_seconds.back()
           : 0.0;
+  summary["frame_rate"] = o.sfm.frame_rate;
   summary["loop_replay"] = o.loop_replay;
   summary["enclosing"] = o.enclosing;
   summary["prefetch_frames_ahead"] = o.pipeline.sfm.prefetch.frames_ahead;
@@ -294,6 +295,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
   ApplySfmOptions(rig, "reconstruct", &o.sfm);
+  ApplyFrameRange(drive, &o.sfm);
   o.pipeline.sfm = o.sfm.sfm;
   o.pipeline.progress_period = isatty(fileno(stderr)) ? 2.0 : 10.0;
   ThrowIfInvalid(o.pipeline.Check(), "PipelineOptions");

@@ -39,6 +39,7 @@ void RunSfmCommand(SfmCommandOptions& o, const GlobalOptions& global) {
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
   ApplySfmOptions(rig, "sfm", &o.sfm);
+  ApplyFrameRange(drive, &o.sfm);
   OutputFolder folder(o.out, "stats/sfm_summary.csv", o.force, "sfm");
   spdlog::info("sfm: {} frames, {} cameras, {} mode (largest camera offset {:.3f} m)",
                drive.NumFrames(), rig.NumCameras(),
@@ -48,17 +49,19 @@ void RunSfmCommand(SfmCommandOptions& o, const GlobalOptions& global) {
   SfmRunnerCallbacks callbacks;
   auto last_progress = std::chrono::steady_clock::now();
   const auto start = last_progress;
+  size_t frames_done = 0;
   if (!global.quiet) {
-    callbacks.frame_done = [&](const SfmFrameRow& row, int keyframes, int points) {
+    callbacks.frame_done = [&](const SfmFrameRow&, int keyframes, int points) {
+      ++frames_done;
       const auto now = std::chrono::steady_clock::now();
       if (std::chrono::duration<double>(now - last_progress).count() < 2.0 &&
-          row.frame + 1 != num_frames)
+          frames_done != num_frames)
         return;
       last_progress = now;
       const double seconds = std::chrono::duration<double>(now - start).count();
-      const double rate = (row.frame + 1) / std::max(seconds, 1e-9);
+      const double rate = frames_done / std::max(seconds, 1e-9);
       spdlog::info("sfm: frame {}/{}, {:.1f} frames/s, ETA {:.0f} s, {} keyframes, {} points",
-                   row.frame + 1, num_frames, rate, (num_frames - row.frame - 1) / rate, keyframes,
+                   frames_done, num_frames, rate, (num_frames - frames_done) / rate, keyframes,
                    points);
     };
   }

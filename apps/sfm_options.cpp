@@ -24,8 +24,13 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
       ->add_option("--min-tracked-share", o->sfm.tracker.keyframes.min_tracked_share,
                    "Keyframe once fewer of the last keyframe's points are tracked")
       ->capture_default_str();
-  command->add_option("--max-frames", o->sfm.max_frames, "0: the whole drive")
-      ->capture_default_str();
+  auto* max_frames = command->add_option("--max-frames", o->sfm.max_frames, "0: the whole drive")
+                         ->capture_default_str();
+  command
+      ->add_option("--frames", o->frames,
+                   "A:B: the drive's frames A to B-1 only (0-based, \"A:\" to the end), named "
+                   "and stamped as in the whole drive (segments of a drive; see `merge`)")
+      ->excludes(max_frames);
   command
       ->add_option("--prefetch", o->sfm.prefetch.frames_ahead,
                    "Frames whose images are decoded ahead of the SfM")
@@ -80,6 +85,44 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
         "non-central mode (--non-central) is the right one for this rig",
         command_name, rig.MaxCenterOffset(), 100.0 * offset_ratio, o->scene_depth,
         offset_ratio * 180.0 / M_PI);
+}
+
+void ApplyFrameRange(const Drive& drive, SfmCommandLine* o) {
+  if (o->frames.empty()) return;
+  const size_t colon = o->frames.find(':');
+  const auto bad = [&](const std::string& why) {
+    throw InputError(drive.folder().string(), "--frames", "'" + o->frames + "': " + why);
+  };
+  if (colon == std::string::npos) bad("expected A:B (frames A to B-1) or A: (A to the end)");
+  const auto parse = [&](const std::string& text, long fallback) -> long {
+    if (text.empty()) return fallback;
+    size_t used = 0;
+    long value = -1;
+    try {
+      value = std::stol(text, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != text.size() || value < 0) bad("'" + text + "' is not a frame index (0 or more)");
+    return value;
+  };
+  const long frames = static_cast<long>(drive.NumFrames());
+  const long first = parse(o->frames.substr(0, colon), 0);
+  long end = parse(o->frames.substr(colon + 1), frames);
+  if (end <= first) bad("the range is empty (B must be above A)");
+  if (first >= frames)
+    bad("starts at frame " + std::to_string(first) + " but the drive has " +
+        std::to_string(frames) + " frames");
+  if (end > frames) {
+    spdlog::warn("--frames {}: the drive has {} frames; the range ends at its last frame ({})",
+                 o->frames, frames, drive.FrameName(static_cast<size_t>(frames - 1)));
+    end = frames;
+  }
+  o->sfm.first_frame = static_cast<int>(first);
+  o->sfm.max_frames = static_cast<int>(end - first);
+  spdlog::info("frames {} to {} of {} ({} to {})", first, end - 1, frames,
+               drive.FrameName(static_cast<size_t>(first)),
+               drive.FrameName(static_cast<size_t>(end - 1)));
 }
 
 }  // namespace omni

@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <string>
 
+#include "calib/drive.h"
 #include "calib/rig.h"
 #include "pipeline/sfm_runner.h"
 
@@ -21,6 +22,8 @@ struct SfmCommandLine {
   // largest offset to it, the log says the non-central mode is the right one.
   double scene_depth = 10.0;
   double max_central_offset_ratio = 0.01;
+  // --frames A:B: the drive's frames A to B-1 ("A:" to the end); empty: every frame.
+  std::string frames;
   SfmRunnerOptions sfm;
 };
 
@@ -29,5 +32,8 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* options);
 // Checks the group (InputError naming the option), sets the mode from the flags or the rig's
 // own `central`, and logs the mode (a warning when the central mode bends the rays too much).
 void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommandLine* options);
+// Sets the run's frame range from --frames (InputError when it is not A:B with A < B, or does not
+// start inside the drive; a range past the drive's end is cut to it, with a warning).
+void ApplyFrameRange(const Drive& drive, SfmCommandLine* options);
 
 }  // namespace omni

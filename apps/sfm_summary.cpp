@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 
 #include "apps/commands.h"
 #include "calib/drive.h"
@@ -51,8 +52,17 @@ nlohmann::json SfmSummaryJson(const Drive& drive, const SfmRunResult& run,
   }
   const bool final_ba =
       run.final_bundle_adjustment_seconds > 0.0 && run.final_rms_angle_after > 0.0;
+  nlohmann::json frame_range = {{"drive_frames", drive.NumFrames()}};
+  if (!run.frames.empty()) {
+    frame_range["first"] = run.frames.front().frame;
+    frame_range["last"] = run.frames.back().frame;
+    frame_range["first_name"] = run.frames.front().name;
+    frame_range["last_name"] = run.frames.back().name;
+  }
   return {
       {"drive", drive.folder().string()},
+      {"drive_absolute", std::filesystem::absolute(drive.folder()).lexically_normal().string()},
+      {"frame_range", frame_range},
       {"status", usable ? "usable" : "not_usable"},
       {"sfm_outcome", SfmOutcomeName(run.outcome)},
       {"outcome", run.outcome_reason},

@@ -1,16 +1,19 @@
 #pragma once
 // The keyframe stream of docs/design.md §7 from a COLMAP text model (cameras.txt, images.txt,
-// points3D.txt), for `omnisculpt surface --colmap`. Images whose names share a frame
-// (the same file name in different folders, e.g. "cam0/000123.png" and "cam1/000123.png") form
-// one keyframe, a rig frame; otherwise every image is a keyframe. Keyframes are ordered by
-// frame name. A point goes to the latest keyframe of its track (paper §3.3: observed by
-// keyframes t' ≤ t) with one ray per observing image, starting at that camera's centre.
+// points3D.txt), for `omnisculpt surface --colmap` and `omnisculpt merge`. Images whose names
+// share a frame (the same file name in sibling camera folders, e.g. "cam0/000123.png" and
+// "cam1/000123.png", or "d1/images/cam0/000123.png" and "d1/images/cam1/000123.png") form one
+// keyframe, a rig frame; otherwise every image is a keyframe. Keyframes are ordered by frame
+// name: the name without its camera folder ("000123.png", "d1/images/000123.png"). A point goes to
+// the latest keyframe of its track (paper §3.3: observed by keyframes t' ≤ t) with one ray per
+// observing image, starting at that camera's centre.
 
 #include <filesystem>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
+#include "calib/colmap_text.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -26,15 +29,14 @@ std::vector<SurfaceKeyframe> LoadColmapKeyframes(
     const std::filesystem::path& model, std::unordered_map<PointId, Rgb8>* point_colors = nullptr,
     Eigen::Vector3d* world_up = nullptr);
 
-// The three files' text, for ParseColmapKeyframes.
-struct ColmapTextModel {
-  std::string cameras;   // cameras.txt
-  std::string images;    // images.txt
-  std::string points3d;  // points3D.txt
-};
 // LoadColmapKeyframes on text in memory; `model` names the folder in the errors.
 std::vector<SurfaceKeyframe> ParseColmapKeyframes(
     const ColmapTextModel& text, const std::filesystem::path& model,
     std::unordered_map<PointId, Rgb8>* point_colors = nullptr, Eigen::Vector3d* world_up = nullptr);
+
+// The keyframe stream of a model in memory (ReadColmapModel of calib/colmap_text.h).
+std::vector<SurfaceKeyframe> ColmapKeyframes(
+    const ColmapModel& model, std::unordered_map<PointId, Rgb8>* point_colors = nullptr,
+    Eigen::Vector3d* world_up = nullptr);
 
 }  // namespace omni

@@ -35,6 +35,7 @@ std::string SfmRunnerOptions::Check() const {
         {"tracker", tracker.Check()},
         {"loop", loop.Check()}})
     if (!check.empty()) return std::string(name) + "." + check;
+  if (first_frame < 0) return "first_frame: expected 0 or more";
   if (max_frames < 0) return "max_frames: expected 0 (all) or more";
   if (!(usable_tracked_frames_share >= 0.0 && usable_tracked_frames_share <= 1.0))
     return "usable_tracked_frames_share: expected a share in [0, 1]";
@@ -70,7 +71,9 @@ const char* SfmOutcomeName(SfmOutcome outcome) {
 }
 
 size_t SfmFramesToRun(const SfmRunnerOptions& options, size_t input_frames) {
-  return options.max_frames > 0 ? std::min<size_t>(input_frames, options.max_frames) : input_frames;
+  const size_t first = static_cast<size_t>(std::max(0, options.first_frame));
+  const size_t available = input_frames > first ? input_frames - first : 0;
+  return options.max_frames > 0 ? std::min<size_t>(available, options.max_frames) : available;
 }
 
 void ConfigureAllocatorForSfm() {
@@ -373,15 +376,19 @@ SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunne
   bool stopped = false;
   {
     // Stopped and joined when this scope ends (a stop, an error, or the last frame).
-    FramePrefetcher prefetcher(num_frames, source.load, options.prefetch);
-    for (size_t f = 0; f < num_frames; ++f) {
+    const size_t first = static_cast<size_t>(options.first_frame);
+    FramePrefetcher prefetcher(
+        num_frames, [&source, first](size_t f) { return source.load(first + f); },
+        options.prefetch);
+    for (size_t f = first; f < first + num_frames; ++f) {
       if (callbacks.stop && callbacks.stop()) {
         stopped = true;
         break;
       }
       const auto wait_start = Clock::now();
       std::optional<PrefetchedFrame> next = prefetcher.Next();
-      if (!next) break;  // cannot happen: the prefetcher delivers every frame until stopped
+      if (!next) break;      // cannot happen: the prefetcher delivers every frame until stopped
+      next->frame += first;  // the input's index
       const double waited = SecondsSince(wait_start);
       runner.AddFrame(std::move(*next), source.name(f), waited);
     }

@@ -44,7 +44,11 @@ struct SfmRunnerOptions {
   // matched with each other, so that a rig that does not move starts a metric map from its
   // own baseline (TrackerOptions::stereo_initialisation).
   bool stereo_matching = true;
-  int max_frames = 0;  // 0: every frame of the input
+  // The frames of the input the run reads: max_frames of them (0: to the end) from first_frame
+  // on (`--frames A:B`). Rows, keyframes and outputs keep the input's frame indices, so that two
+  // runs over overlapping ranges of one drive name their shared frames alike.
+  int first_frame = 0;
+  int max_frames = 0;
   // A run is usable when the SfM initialised and at least this share of the frames read was
   // tracked; below it the map covers too little of the drive (tracking was lost for good).
   double usable_tracked_frames_share = 0.5;
@@ -180,11 +184,12 @@ class SfmRunner {
   std::unique_ptr<Impl> impl_;
 };
 
-// The frames a run over an input of `input_frames` frames reads (max_frames applied).
+// The frames a run over an input of `input_frames` frames reads (first_frame and max_frames
+// applied).
 size_t SfmFramesToRun(const SfmRunnerOptions& options, size_t input_frames);
 
-// Runs the SfM over every frame of `source` (max_frames applied), the images decoded ahead on
-// their own thread. Stopped early by callbacks.stop (the result then holds what was done).
+// Runs the SfM over the frames of `source` (first_frame and max_frames applied), the images decoded
+// ahead on their own thread. Stopped early by callbacks.stop (the result then holds what was done).
 SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunnerOptions& options,
                     const SfmRunnerCallbacks& callbacks = {});
 

@@ -9,7 +9,7 @@
 #   SHARED  a new or empty folder on such a file system: segments.tsv, segments/<k>/ (each
 #           segment's reconstruction), city/ (the merged map), logs/, timing/, jobs.env
 #   --segments K       segments (default 4)
-#   --overlap F        frames each segment shares with the next (default 40)
+#   --overlap F        frames each segment shares with the next (default 60)
 #   --cpus-per-task C  CPUs of each task (default 2: the SfM and the surface threads)
 #   --mem-per-task M   memory of each task, as sbatch's --mem (default: the partition's)
 #   --omnisculpt PATH  the executable (default build/omnisculpt of this repository, else the one
@@ -27,7 +27,7 @@ die() { echo "$me: error: $*" >&2; exit 2; }
 
 positional=()
 segments=4
-overlap=40
+overlap=60
 cpus=2
 mem=""
 omnisculpt=""

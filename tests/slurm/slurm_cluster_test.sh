@@ -16,8 +16,11 @@
 # cluster is stopped whatever happens (trap); a cluster that cannot start fails the test.
 #
 # Usage: slurm_cluster_test.sh --omnisculpt PATH --scripts SCRIPTS_SLURM_DIR --work DIR
+# For the figures only (not checked) it also evaluates one run of the whole drive with
+# --no-loop-closure: the merge does not close a revisit between segments that share no frame.
 # Environment: OMNI_SLURM_TEST_WAIT (seconds to wait for the jobs, default 2400),
-#   OMNI_SLURM_TEST_CPUS_PER_TASK (default 2 on 8 cores or more, else 1: two tasks at once).
+#   OMNI_SLURM_TEST_CPUS_PER_TASK (default 2 on 8 cores or more, else 1: two tasks at once),
+#   OMNI_SLURM_TEST_OVERLAP (frames each segment shares with the next, default 60).
 set -uo pipefail
 me="slurm_cluster_test"
 fail() { echo "FAIL: $me: $*"; exit 1; }
@@ -36,7 +39,7 @@ done
 [ -n "$work" ] || fail "--work: expected a folder"
 
 segments=4
-overlap=40
+overlap="${OMNI_SLURM_TEST_OVERLAP:-60}"
 wait_limit="${OMNI_SLURM_TEST_WAIT:-2400}"
 cores="$(nproc)"
 cpus_per_task="${OMNI_SLURM_TEST_CPUS_PER_TASK:-$([ "$cores" -ge 8 ] && echo 2 || echo 1)}"
@@ -153,6 +156,13 @@ t="$(now)"
 "$omnisculpt" --quiet reconstruct "$drive" --out "$single" || fail "the single reconstruct of $drive failed"
 single_s="$(seconds_between "$t" "$(now)")"
 
+single_no_loop="$work/single_no_loop_closure"
+t="$(now)"
+"$omnisculpt" --quiet reconstruct "$drive" --no-loop-closure --out "$single_no_loop" ||
+  fail "the single reconstruct --no-loop-closure of $drive failed"
+single_no_loop_s="$(seconds_between "$t" "$(now)")"
+"$omnisculpt" --quiet eval --gt "$drive" --rec "$single_no_loop" || fail "eval of the single run without loop closure failed"
+
 city="$shared/city"
 t="$(now)"
 city_eval_ok=1
@@ -170,12 +180,13 @@ printf '    %-52s %8s\n' "cluster bring-up (munged, slurmctld, slurmd, node idle
   "merge job (last segment's end to its start: $merge_wait_s)" "$merge_s" \
   "segments + merge" "$(awk -v a="$cluster_segments_s" -v b="$merge_wait_s" -v c="$merge_s" 'BEGIN { printf "%.1f", a + b + c }')" \
   "single reconstruct of the $(ls "$drive/images/$(ls "$drive/images" | head -n 1)" | wc -l) frames" "$single_s" \
+  "single reconstruct --no-loop-closure" "$single_no_loop_s" \
   "eval of the city / of the single run" "$city_eval_s / $single_eval_s"
 
 # Both evaluations side by side, and the checks.
-OMNI_EXECUTABLE="$omnisculpt" python3 - "$city" "$single" "$merge_code" "${#failed_segments[@]}" "$city_eval_ok" <<'PY'
+OMNI_EXECUTABLE="$omnisculpt" python3 - "$city" "$single" "$single_no_loop" "$merge_code" "${#failed_segments[@]}" "$city_eval_ok" <<'PY'
 import json, os, subprocess, sys
-city, single, merge_code, failed_segments, city_eval_ok = sys.argv[1:6]
+city, single, single_no_loop, merge_code, failed_segments, city_eval_ok = sys.argv[1:7]
 problems = []
 
 def figures(rec):
@@ -217,16 +228,18 @@ for name in ["poses.tum", "frame_poses.tum", "points.ply", "surface.ply", "surfa
         problems.append("%s: missing" % os.path.join(city, name))
 
 s = figures(single)
+n = figures(single_no_loop)
 c = figures(city) if city_eval_ok == "1" else None
 if c is None:
     problems.append("eval of the city failed")
-print("\nslurm_cluster_test: %-40s %14s %14s" % ("eval (omnisculpt eval --gt DRIVE)", "city (merged)", "single run"))
+print("\nslurm_cluster_test: %-40s %14s %14s %16s" % ("eval (omnisculpt eval --gt DRIVE)", "city (merged)",
+                                                     "single run", "single, no loop"))
 for key in s:
     def show(v):
         if v is None:
             return "-"
         return "%.4f" % v if isinstance(v, float) else str(v)
-    print("    %-40s %14s %14s" % (key, show(c[key] if c else None), show(s[key])))
+    print("    %-40s %14s %14s %16s" % (key, show(c[key] if c else None), show(s[key]), show(n[key])))
 
 if c is not None:
     if not c["ATE RMS (m)"] <= 1.5 * s["ATE RMS (m)"]:

@@ -2,7 +2,8 @@
 # A one-node Slurm cluster on this machine, for the cluster test (tests/slurm/) and for trying
 # scripts/slurm/submit.sh without a cluster. Every file is in DIR: slurm.conf (from
 # scripts/slurm/local/slurm.conf.in), the MUNGE key and socket, the daemons' state, spool, pid
-# and log files. No systemd, no cgroups; runs as root in a container (CI) or as a user.
+# and log files. No systemd, no cgroups; runs as root in a container (CI; as another user the
+# daemons run as that user, which has not been tried).
 #
 # Usage: scripts/slurm/local_cluster.sh start DIR   # munged, slurmctld, slurmd; waits for the node
 #        scripts/slurm/local_cluster.sh stop DIR    # cancels the jobs, stops exactly those daemons

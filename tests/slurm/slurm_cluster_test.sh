@@ -4,7 +4,8 @@
 # in 4 overlapping segments through scripts/slurm/submit.sh, waits for the array and the merge,
 # then compares the merged map with one `omnisculpt reconstruct` of the whole drive, both scored
 # by `omnisculpt eval`:
-#   * every segment and the merge succeeded, and merge.json names no missing segment;
+#   * every segment and the merge succeeded, and merge.json names no missing segment and merged
+#     every input (each joined to the others by a verified overlap);
 #   * the city's keyframe ATE (eval.json poses.ate_translation_m.rmse) is at most 1.5 times the
 #     single run's;
 #   * the city's surface.ply is an oriented 2-manifold with boundary (mesh-check
@@ -218,9 +219,12 @@ if failed_segments != "0":
 merge_json = os.path.join(city, "merge.json")
 if os.path.isfile(merge_json):
     with open(merge_json) as f:
-        missing = json.load(f).get("missing", [])
-    if missing:
-        problems.append("merge.json: missing %s" % missing)
+        merge = json.load(f)
+    if merge.get("missing"):
+        problems.append("merge.json: missing %s" % merge["missing"])
+    left_out = [(i.get("folder"), i.get("why")) for i in merge.get("inputs", []) if not i.get("merged")]
+    if left_out:
+        problems.append("merge.json: segments not merged %s" % left_out)
 else:
     problems.append("%s: missing" % merge_json)
 for name in ["poses.tum", "frame_poses.tum", "points.ply", "surface.ply", "surface_closed.ply", "sparse", "stats"]:

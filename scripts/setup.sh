@@ -1,10 +1,22 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages omnisculpt needs (only those missing) and builds it in Release.
-# Usage: scripts/setup.sh [--no-build]
+# Usage: scripts/setup.sh [--no-build] [--with-test-packages]
+#   --with-test-packages  also the packages only the tests need (scripts/test.sh passes it): Slurm
+#                         and MUNGE for the local one-node cluster of tests/slurm/.
 # Environment: BUILD_DIR (default build), OMNI_JOBS (default: all cores).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
+
+build=1
+test_packages=0
+for arg in "$@"; do
+  case "$arg" in
+    --no-build) build=0 ;;
+    --with-test-packages) test_packages=1 ;;
+    *) echo "omnisculpt setup: error: unknown option '$arg' (--no-build, --with-test-packages)" >&2; exit 2 ;;
+  esac
+done
 
 packages=(
   build-essential cmake ninja-build ccache pkg-config git
@@ -21,6 +33,12 @@ packages=(
 command -v node >/dev/null 2>&1 || packages+=(nodejs)
 command -v npm >/dev/null 2>&1 || packages+=(npm)
 command -v chromium >/dev/null 2>&1 || packages+=(chromium fonts-liberation)
+# Test-only: the cluster test (tests/slurm/) starts a one-node Slurm cluster on localhost
+# (scripts/slurm/local_cluster.sh): slurmctld, slurmd, the client commands and munged; python3
+# reads the evaluations there.
+if [ "$test_packages" = 1 ]; then
+  packages+=(slurm-wlm slurmctld slurmd slurm-client munge python3)
+fi
 
 missing=()
 for p in "${packages[@]}"; do
@@ -36,7 +54,7 @@ if [ ${#missing[@]} -gt 0 ]; then
   "${sudo_cmd[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
-[ "${1:-}" = "--no-build" ] && exit 0
+[ "$build" = 0 ] && exit 0
 
 build_dir="${BUILD_DIR:-build}"
 jobs="${OMNI_JOBS:-$(nproc)}"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs what is missing, builds omnisculpt (Release, all cores) and runs every test; then the
+# Installs what is missing (with the test-only packages: Slurm and MUNGE), builds omnisculpt (Release, all cores) and runs every test; then the
 # unit tests again built with AddressSanitizer and UndefinedBehaviorSanitizer, and a short fuzz
 # run of every parser (docs/errors.md).
 # Environment: BUILD_DIR (default build), OMNI_SANITIZE_TESTS (default 1; 0 skips the sanitizer
@@ -8,7 +8,7 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 step_start=$SECONDS
-bash scripts/setup.sh
+bash scripts/setup.sh --with-test-packages
 echo "test.sh: setup and build $((SECONDS - step_start)) s"
 build_dir="${BUILD_DIR:-build}"
 step_start=$SECONDS

@@ -80,6 +80,20 @@ void ReportNotUsable(const std::string& message) {
   CommandExitCode() = kExitNotUsable;
 }
 
+bool ReportSurfaceChecks(const std::string& command, const MeshCheckReport& closed,
+                         const MeshCheckReport& observed) {
+  if (!closed.ok) {
+    spdlog::error("{}: δO is not a closed oriented 2-manifold: {}", command, closed.Summary());
+  } else if (!observed.ok) {
+    spdlog::error("{}: the observed surface is not an oriented 2-manifold with boundary: {}",
+                  command, observed.Summary());
+  } else {
+    return true;
+  }
+  CommandExitCode() = kExitCheckFailed;
+  return false;
+}
+
 int RunCommandLine(int argc, char** argv) {
   CLI::App app{
       "omnisculpt: camera poses, sparse points and a 2-manifold surface of a city from the "

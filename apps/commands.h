@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "calib/mesh_check.h"
+
 namespace omni {
 
 struct SculptorOptions;
@@ -34,6 +36,11 @@ constexpr int kExitNotUsable = 3;
 
 // One line on stderr ("omnisculpt: error: <message>") and exit code kExitNotUsable.
 void ReportNotUsable(const std::string& message);
+// The manifold checks of a command's two surfaces: when δO (`closed`) is not a closed oriented
+// 2-manifold, or else the observed surface not one with boundary, one error line naming
+// `command` and exit code kExitCheckFailed. Returns true when both hold.
+bool ReportSurfaceChecks(const std::string& command, const MeshCheckReport& closed,
+                         const MeshCheckReport& observed);
 
 // The warnings logged so far in this process (spdlog warn and error; they went to stderr), for
 // the run's JSON summary.

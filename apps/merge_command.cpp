@@ -278,13 +278,8 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
       out.c_str());
   if (!failure.empty()) {
     ReportNotUsable(o.out + ": " + failure);
-  } else if (!closed_manifold.ok) {
-    spdlog::error("merge: δO is not a closed oriented 2-manifold: {}", closed_manifold.Summary());
-    CommandExitCode() = kExitCheckFailed;
-  } else if (!manifold.ok) {
-    spdlog::error("merge: the observed surface is not an oriented 2-manifold with boundary: {}",
-                  manifold.Summary());
-    CommandExitCode() = kExitCheckFailed;
+  } else {
+    ReportSurfaceChecks("merge", closed_manifold, manifold);
   }
 }
 

@@ -269,16 +269,8 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
   if (!failure.empty()) {
     ReportNotUsable(drive.folder().string() + ": " + failure + "; " + out.string() + "/" +
                     kSummaryFile + " and stats/sfm_frames.csv say what happened");
-  } else if (!closed_manifold.ok) {
-    spdlog::error("reconstruct: δO is not a closed oriented 2-manifold: {}",
-                  closed_manifold.Summary());
-    CommandExitCode() = kExitCheckFailed;
-  } else if (!manifold.ok) {
-    spdlog::error(
-        "reconstruct: the observed surface is not an oriented 2-manifold with "
-        "boundary: {}",
-        manifold.Summary());
-    CommandExitCode() = kExitCheckFailed;
+  } else {
+    ReportSurfaceChecks("reconstruct", closed_manifold, manifold);
   }
 }
 

@@ -211,14 +211,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     ReportNotUsable((o.colmap.empty() ? o.from_gt : o.colmap) + ": the surface is empty (" +
                     std::to_string(stream.size()) + " keyframes, " + std::to_string(added) +
                     " points added)");
-  } else if (!closed_report.ok) {
-    spdlog::error("surface: δO is not a closed oriented 2-manifold: {}", closed_report.Summary());
-    CommandExitCode() = kExitCheckFailed;
-  } else if (!report.ok) {
-    spdlog::error("surface: the observed surface is not an oriented 2-manifold with boundary: {}",
-                  report.Summary());
-    CommandExitCode() = kExitCheckFailed;
-  } else if (mesh.triangles.empty()) {
+  } else if (ReportSurfaceChecks("surface", closed_report, report) && mesh.triangles.empty()) {
     spdlog::warn("surface: no triangle of δO is observed: surface.ply is empty");
   }
 }

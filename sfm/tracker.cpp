@@ -514,10 +514,11 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   }
   RelativeMotion relative;
   bool relative_alone = false;
-  if (!resection.ok && search && retrying && options.relative_pose_fallback &&
+  if (!resection.ok && retrying && options.relative_pose_fallback &&
       PoseFromRelativeMotion(observations, &relative)) {
-    result.reobserved += Reobserve(&observations, relative.world_from_rig,
-                                   options.predicted_search_radius_scale, search);
+    if (search)
+      result.reobserved += Reobserve(&observations, relative.world_from_rig,
+                                     options.predicted_search_radius_scale, search);
     Resection again = Resect(observations, &relative.world_from_rig);
     if (again.ok) {
       resection = std::move(again);

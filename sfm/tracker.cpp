@@ -228,13 +228,14 @@ struct Tracker::Impl {
     Rigid3d world_from_rig;
     bool ok = false;
   };
-  // P3P / GP3P in RANSAC on the observations of live map points; a prior pose (world_from_rig)
-  // is tried first and taken without the RANSAC when it has accept_inliers inliers.
+  // The resection's RANSAC options: in RetryFrame, the threshold times retry_angle_error_scale.
   RansacOptions ResectionRansac() const {
     RansacOptions ransac = options.resection_ransac;
     if (retrying) ransac.max_angle_error *= options.retry_angle_error_scale;
     return ransac;
   }
+  // P3P / GP3P in RANSAC on the observations of live map points; a prior pose (world_from_rig)
+  // is tried first and taken without the RANSAC when it has accept_inliers inliers.
   Resection Resect(const std::vector<TrackObservation>& observations,
                    const Rigid3d* prior_world_from_rig = nullptr, int accept_inliers = 0);
   // The relative-pose fallback (TrackerOptions::relative_pose_fallback): a pose of the frame
@@ -1054,7 +1055,10 @@ FrameResult Tracker::Impl::Process(const std::vector<TrackObservation>& observat
   }
   if (initialising && result.tracked) {
     initialised = true;
-    // The frames read while initialising, resected in the new map.
+    // The frames read while initialising, resected in the new map (their own matches: the
+    // threshold of a frame the front end tracked, also when a retry initialised).
+    const bool was_retrying = retrying;
+    retrying = false;
     for (const auto& [earlier, earlier_observations] : init_frames) {
       if (earlier == frame) continue;
       const Resection resection = Resect(earlier_observations);
@@ -1066,6 +1070,7 @@ FrameResult Tracker::Impl::Process(const std::vector<TrackObservation>& observat
       late.status = "resected once the map existed";
       revised.push_back({earlier, late});
     }
+    retrying = was_retrying;
     init_frames.clear();
   }
   return result;

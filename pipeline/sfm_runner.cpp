@@ -219,11 +219,17 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
       for (int reference = 0; reference < references && !row.result.tracked; ++reference) {
         // A frame that started the map (or became its keyframe) has nothing to retry.
         if (!tracker.CanRetryFrame()) break;
-        if (!s.builder.RematchByDescriptors(reference, &tracked)) break;
+        if (!s.builder.RematchByDescriptors(reference, &tracked, [&tracker](int track) {
+              Eigen::Vector3d position;
+              return tracker.TrackPosition(track, &position);
+            }))
+          break;
         const FrameResult retry =
             tracker.RetryFrame(tracked.observations, s.builder.MapPointSearcher());
         row.matched = tracked.num_matched;
         row.relocalising = true;
+        spdlog::debug("frame {}: by descriptors against reference {}: {} matched, {}", name,
+                      reference, tracked.num_matched, retry.tracked ? "tracked" : retry.status);
         if (!retry.tracked) continue;
         row.result = retry;
         row.result.status += " (by descriptors, reference " + std::to_string(reference) + ")";

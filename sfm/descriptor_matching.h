@@ -1,11 +1,14 @@
 #pragma once
-// Matching without a motion prior: a binary descriptor (ORB's steered BRIEF, upright, one
-// scale) at each Harris corner, and all-against-all matching of two sets of corners by Hamming
-// distance with a ratio test and a mutual-best check. The tracker's front end falls back on it
-// when the image-motion model does not hold: the first frames of a drive (no motion model yet),
-// wide baselines and low frame rates, and the re-localisation after frames it could not track.
-// The matches are not verified here: the caller's geometry (relative pose or resection in
-// RANSAC) is the verification.
+// Matching without a motion prior: a binary descriptor (ORB's steered BRIEF) at each Harris
+// corner, at several scales of the image (a corner seen nearer or farther in a wide step:
+// two corners match at the smallest distance between the one's first scale and any of the
+// other's, either way), upright by default (a rig on a car does not roll; steering by the
+// patch's intensity centroid, `oriented`, lost matches on the synthetic drives), and
+// all-against-all matching of two sets of corners by Hamming distance with a ratio test and a
+// mutual-best check. The tracker's front end falls back on it when the image-motion model does
+// not hold: the first frames of a drive (no motion model yet), wide baselines and low frame
+// rates, and the re-localisation after frames it could not track. The matches are not verified
+// here: the caller's geometry (relative pose or resection in RANSAC) is the verification.
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
@@ -23,11 +26,17 @@ struct DescriptorMatchingOptions {
   // Absolute bound on the best distance (of the descriptor's 256 bits).
   int max_distance = 80;
   bool mutual = true;  // the match must also be the best for the second set's descriptor
+  // Scales of the image each corner is described at (1: one scale), level_scale apart.
+  int levels = 3;
+  double level_scale = 1.2;
+  // Steered by the orientation of the patch (intensity centroid) at each scale; false: upright.
+  bool oriented = false;
 
   std::string Check() const;
 };
 
-// One 32-byte row per corner (CV_8U), in the corners' order.
+// options.levels 32-byte rows per corner (CV_8U), in the corners' order: corner i's scales are
+// rows i * levels to i * levels + levels - 1.
 cv::Mat DescribeCorners(const cv::Mat& prepared, const std::vector<Eigen::Vector2d>& corners,
                         const DescriptorMatchingOptions& options);
 
@@ -37,7 +46,8 @@ struct DescriptorMatch {
   int distance = 0;
 };
 
-// Each row of descriptors1 and of descriptors2 appears in at most one match.
+// Matches of corners (index1, index2: corners, not rows; descriptors of DescribeCorners with
+// the same options); each corner of either set appears in at most one match.
 std::vector<DescriptorMatch> MatchDescriptors(const cv::Mat& descriptors1,
                                               const cv::Mat& descriptors2,
                                               const DescriptorMatchingOptions& options);

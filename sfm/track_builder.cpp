@@ -181,7 +181,8 @@ void TrackBuilder::BuildObservations(TrackedFrame* frame) {
 
 const cv::Mat& TrackBuilder::Describe(CameraState* state) const {
   if (state->descriptors.empty() ||
-      state->descriptors.rows != static_cast<int>(state->corners.size()))
+      state->descriptors.rows !=
+          static_cast<int>(state->corners.size()) * options_.descriptors.levels)
     state->descriptors = DescribeCorners(state->prepared, state->corners, options_.descriptors);
   return state->descriptors;
 }
@@ -203,7 +204,8 @@ std::vector<TrackBuilder::CameraState>* TrackBuilder::RematchReference(int refer
   return &keyframe_history_[reference - (own_entry ? 1 : 0)].second;
 }
 
-bool TrackBuilder::RematchByDescriptors(int reference, TrackedFrame* frame) {
+bool TrackBuilder::RematchByDescriptors(int reference, TrackedFrame* frame,
+                                        const std::function<bool(int track)>& has_map_point) {
   std::vector<CameraState>* reference_state = RematchReference(reference);
   if (!reference_state) return false;
   const auto start = std::chrono::steady_clock::now();
@@ -215,22 +217,46 @@ bool TrackBuilder::RematchByDescriptors(int reference, TrackedFrame* frame) {
   tbb::parallel_for(0, 2 * num_cameras, [&](int task) {
     Describe(task < num_cameras ? &cameras_[task] : &keyframe[task - num_cameras]);
   });
-  cv::Mat now, then;
+  cv::Mat now, then, then_points;
+  std::vector<int> point_rows;  // the rows of `then` whose track has a map point
   for (int c = 0; c < num_cameras; ++c) {
     now.push_back(cameras_[c].descriptors);
     then.push_back(keyframe[c].descriptors);
     for (size_t i = 0; i < cameras_[c].corners.size(); ++i) rows_now.emplace_back(c, i);
-    for (size_t i = 0; i < keyframe[c].corners.size(); ++i) rows_then.emplace_back(c, i);
+    for (size_t i = 0; i < keyframe[c].corners.size(); ++i) {
+      if (has_map_point && has_map_point(keyframe[c].tracks[i])) {
+        point_rows.push_back(static_cast<int>(rows_then.size()));
+        const int levels = options_.descriptors.levels;
+        then_points.push_back(keyframe[c].descriptors.rowRange(static_cast<int>(i) * levels,
+                                                               static_cast<int>(i + 1) * levels));
+      }
+      rows_then.emplace_back(c, i);
+    }
   }
-  const std::vector<DescriptorMatch> matches = MatchDescriptors(now, then, options_.descriptors);
-  // The keyframe's track for each matched corner; a corner of the same camera that carried
-  // that track before gives it up (one observation of a track per camera).
+  // First the reference's corners that are map points (the ratio test among them alone: a
+  // map point is one of a few hundred, not of every corner, so more of them pass it), then
+  // every corner for the corners left (tracks to triangulate later).
+  std::vector<DescriptorMatch> matches;
+  std::vector<char> used_now(rows_now.size(), 0), used_then(rows_then.size(), 0);
+  if (!point_rows.empty())
+    for (DescriptorMatch match : MatchDescriptors(now, then_points, options_.descriptors)) {
+      match.index2 = point_rows[match.index2];
+      used_now[match.index1] = used_then[match.index2] = 1;
+      matches.push_back(match);
+    }
+  for (const DescriptorMatch& match : MatchDescriptors(now, then, options_.descriptors))
+    if (!used_now[match.index1] && !used_then[match.index2]) matches.push_back(match);
+  // The keyframe's track for each matched corner; a track is given to one corner per camera
+  // (the first match: the map points' come first).
   std::vector<std::vector<int>> assigned(num_cameras);
+  std::vector<std::unordered_set<int>> assigned_tracks(num_cameras);
   for (int c = 0; c < num_cameras; ++c) assigned[c].assign(cameras_[c].corners.size(), -1);
   for (const DescriptorMatch& match : matches) {
     const auto [c, i] = rows_now[match.index1];
     const auto [kc, ki] = rows_then[match.index2];
-    assigned[c][i] = keyframe[kc].tracks[ki];
+    const int track = keyframe[kc].tracks[ki];
+    if (!assigned_tracks[c].insert(track).second) continue;
+    assigned[c][i] = track;
   }
   // The association replaces the motion model's: a corner no descriptor matched starts a
   // new track.
@@ -262,8 +288,13 @@ int TrackBuilder::MatchOverlappingCameras(TrackedFrame* frame) {
     if (baseline.norm() < 1e-6) continue;
     CameraState& state_a = cameras_[a];
     CameraState& state_b = cameras_[b];
+    // One instant, a baseline of centimetres: no change of scale between the two views, and
+    // one scale keeps the ratio test as sharp as it can be.
+    DescriptorMatchingOptions one_scale = options_.descriptors;
+    one_scale.levels = 1;
     const std::vector<DescriptorMatch> matches =
-        MatchDescriptors(Describe(&state_a), Describe(&state_b), options_.descriptors);
+        MatchDescriptors(DescribeCorners(state_a.prepared, state_a.corners, one_scale),
+                         DescribeCorners(state_b.prepared, state_b.corners, one_scale), one_scale);
     std::unordered_set<int> tracks_b(state_b.tracks.begin(), state_b.tracks.end());
     for (const DescriptorMatch& match : matches) {
       Eigen::Vector3d bearing_a, bearing_b;

@@ -90,8 +90,11 @@ class TrackBuilder {
   // 0 is the last tracked frame, then the last keyframes, newest first (a frame is listed
   // once): every corner a descriptor matches takes the reference corner's track; the others
   // start new tracks. False (and *frame untouched) when there is no such reference. The
-  // map-point search then works on the new tracks.
-  bool RematchByDescriptors(int reference, TrackedFrame* frame);
+  // map-point search then works on the new tracks. With has_map_point, the reference's corners
+  // whose track has a map point are matched first, among themselves (sfm/descriptor_matching.h
+  // ratio test over them alone), then every corner for the corners left.
+  bool RematchByDescriptors(int reference, TrackedFrame* frame,
+                            const std::function<bool(int track)>& has_map_point = {});
   int NumRematchReferences() const;
   // Matches the corners of every pair of cameras of the frame just added whose fields of view
   // overlap, by descriptors, keeping the matches that the rig's epipolar geometry accepts;

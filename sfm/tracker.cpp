@@ -1,5 +1,7 @@
 #include "sfm/tracker.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cassert>
 #include <chrono>
@@ -47,6 +49,17 @@ std::string TrackerOptions::Check() const {
   if (!(reobservation_max_angle_error > 0.0))
     return "reobservation_max_angle_error: expected a positive angle (radians)";
   if (!(noncentral_init_margin >= 1.0)) return "noncentral_init_margin: expected at least 1";
+  if (!(retry_angle_error_scale >= 1.0)) return "retry_angle_error_scale: expected at least 1";
+  if (min_relative_matches < 8) return "min_relative_matches: expected at least 8";
+  if (min_relative_inliers < 5 || min_relative_inliers > min_relative_matches)
+    return "min_relative_inliers: expected in [5, min_relative_matches]";
+  if (min_scale_points < 1) return "min_scale_points: expected at least 1";
+  if (min_relative_inliers_alone < min_relative_inliers)
+    return "min_relative_inliers_alone: expected at least min_relative_inliers";
+  if (min_scale_points_alone < min_scale_points)
+    return "min_scale_points_alone: expected at least min_scale_points";
+  if (!(scale_max_angle_error > 0.0))
+    return "scale_max_angle_error: expected a positive angle (radians)";
   if (!(predicted_search_radius_scale >= 1.0))
     return "predicted_search_radius_scale: expected at least 1";
   return {};
@@ -93,12 +106,17 @@ struct Tracker::Impl {
     Rigid3d world_from_rig;
   };
   std::vector<TrackedPose> last_tracked;  // at most two, oldest first
+  // The observations of the last tracked frame (after the map-point search), a reference of
+  // the relative-pose fallback; its pose is last_tracked.back() when the frames agree.
+  int last_frame = -1;
+  std::vector<TrackObservation> last_frame_observations;
   // The frames read after the first keyframe that did not initialise, for their resection
   // once the map exists; the results changed since the last TakeRevisedFrames.
   std::vector<std::pair<int, std::vector<TrackObservation>>> init_frames;
   std::vector<Tracker::RevisedFrame> revised;
   // A map exists: two keyframes, or points triangulated in the first by the rig's baseline.
   bool initialised = false;
+  bool retrying = false;         // in RetryFrame: observations matched by descriptors
   bool map_from_stereo = false;  // the map started from the first keyframe's stereo points
   double travelled = 0.0;
   int travelled_steps = 0;
@@ -210,10 +228,28 @@ struct Tracker::Impl {
     Rigid3d world_from_rig;
     bool ok = false;
   };
+  // The resection's RANSAC options: in RetryFrame, the threshold times retry_angle_error_scale.
+  RansacOptions ResectionRansac() const {
+    RansacOptions ransac = options.resection_ransac;
+    if (retrying) ransac.max_angle_error *= options.retry_angle_error_scale;
+    return ransac;
+  }
   // P3P / GP3P in RANSAC on the observations of live map points; a prior pose (world_from_rig)
   // is tried first and taken without the RANSAC when it has accept_inliers inliers.
   Resection Resect(const std::vector<TrackObservation>& observations,
                    const Rigid3d* prior_world_from_rig = nullptr, int accept_inliers = 0);
+  // The relative-pose fallback (TrackerOptions::relative_pose_fallback): a pose of the frame
+  // from its 2-D matches with a posed frame and the scale of its map points; false when none.
+  struct RelativeMotion {
+    Rigid3d world_from_rig;
+    int inliers = 0;       // of the relative pose
+    int scale_points = 0;  // map points that agree with the scale
+  };
+  bool PoseFromRelativeMotion(const std::vector<TrackObservation>& observations,
+                              RelativeMotion* motion) const;
+  // The observations of live map points and the inliers of a given pose (no estimation).
+  Resection EvaluatePose(const std::vector<TrackObservation>& observations,
+                         const Rigid3d& world_from_rig) const;
   void TriangulateNewPoints(int keyframe);
   void LocalBundleAdjustment();
   void FinalizeUpTo(int end);
@@ -404,7 +440,7 @@ Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservatio
   }
   if (options.central) {
     CentralAbsolutePoseOptions absolute;
-    absolute.ransac = options.resection_ransac;
+    absolute.ransac = ResectionRansac();
     // The central frame sits at central_center in the rig frame.
     prior.pose.translation += prior.pose.rotation * central_center;
     Rigid3d world_from_central;
@@ -413,7 +449,7 @@ Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservatio
     r.world_from_rig = RigFromCentral(world_from_central);
   } else {
     NoncentralAbsolutePoseOptions absolute;
-    absolute.ransac = options.resection_ransac;
+    absolute.ransac = ResectionRansac();
     r.ransac = EstimateNoncentralAbsolutePose(rig, r.bearings, r.cameras, r.positions, absolute,
                                               &r.world_from_rig,
                                               prior_world_from_rig != nullptr ? &prior : nullptr);
@@ -478,6 +514,24 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
       if (result.reobserved > 0) resection = Resect(observations);
     }
   }
+  RelativeMotion relative;
+  bool relative_alone = false;
+  if (!resection.ok && retrying && options.relative_pose_fallback &&
+      PoseFromRelativeMotion(observations, &relative)) {
+    if (search)
+      result.reobserved += Reobserve(&observations, relative.world_from_rig,
+                                     options.predicted_search_radius_scale, search);
+    Resection again = Resect(observations, &relative.world_from_rig);
+    if (again.ok) {
+      resection = std::move(again);
+      result.status = "resected after its relative motion; ";
+    } else if (relative.inliers >= options.min_relative_inliers_alone &&
+               relative.scale_points >= options.min_scale_points_alone) {
+      resection = EvaluatePose(observations, relative.world_from_rig);
+      relative_alone = true;
+      result.status = "posed by its relative motion; ";
+    }
+  }
   if (!resection.ok) {
     result.status = "resection failed: " + std::to_string(resection.ransac.num_inliers) +
                     " inliers of " + std::to_string(resection.bearings.size());
@@ -529,6 +583,8 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   result.tracked = true;
   result.world_from_rig = world_from_rig;
   result.inliers = ransac.num_inliers;
+  last_frame = num_frames - 1;
+  last_frame_observations = observations;
 
   // Keyframe decision against the last keyframe.
   const int last = static_cast<int>(keyframes.size()) - 1;
@@ -571,8 +627,13 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
     std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
     candidate.median_depth = depths[depths.size() / 2];
   }
-  const KeyframeDecisionReason decision = DecideKeyframe(candidate, options.keyframes);
-  result.status = decision.reason;
+  KeyframeDecisionReason decision = DecideKeyframe(candidate, options.keyframes);
+  if (relative_alone) {
+    // Its matches with the reference become points only at a keyframe.
+    decision.decision = KeyframeDecision::kKeyframe;
+    decision.reason = "keyframe of a thin map";
+  }
+  result.status += decision.reason;
   if (decision.decision != KeyframeDecision::kKeyframe) return result;
 
   Keyframe keyframe;
@@ -597,6 +658,126 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   result.keyframe = true;
   result.world_from_rig = keyframes.back().world_from_rig;
   return result;
+}
+
+Tracker::Impl::Resection Tracker::Impl::EvaluatePose(
+    const std::vector<TrackObservation>& observations, const Rigid3d& world_from_rig) const {
+  Resection r;
+  r.world_from_rig = world_from_rig;
+  const double max_cos = std::cos(ResectionRansac().max_angle_error);
+  for (size_t j = 0; j < observations.size(); ++j) {
+    const auto it = track_to_point.find(observations[j].track);
+    if (it == track_to_point.end() || !points[it->second].alive) continue;
+    const Eigen::Vector3d& position = points[it->second].position;
+    r.bearings.push_back(options.central ? RigBearing(observations[j]) : observations[j].bearing);
+    r.cameras.push_back(observations[j].camera);
+    r.positions.push_back(position);
+    r.observation_index.push_back(static_cast<int>(j));
+    const WorldRay ray = Ray(world_from_rig, observations[j].camera, observations[j].bearing);
+    const Eigen::Vector3d to_point = position - ray.center;
+    const bool inlier = ray.direction.normalized().dot(to_point) > max_cos * to_point.norm();
+    r.ransac.inlier_mask.push_back(inlier ? 1 : 0);
+    r.ransac.num_inliers += inlier;
+  }
+  r.ransac.success = true;
+  r.ok = true;
+  return r;
+}
+
+bool Tracker::Impl::PoseFromRelativeMotion(const std::vector<TrackObservation>& observations,
+                                           RelativeMotion* motion) const {
+  // The references: the last tracked frame and the last keyframes.
+  struct Reference {
+    const std::vector<TrackObservation>* observations;
+    Rigid3d world_from_rig;
+  };
+  std::vector<Reference> references;
+  if (!last_tracked.empty() && last_tracked.back().frame == last_frame)
+    references.push_back({&last_frame_observations, last_tracked.back().world_from_rig});
+  const int num_keyframes = static_cast<int>(keyframes.size());
+  for (int k = num_keyframes - 1; k >= std::max(0, num_keyframes - 3); --k)
+    references.push_back({&keyframes[k].observations, keyframes[k].world_from_rig});
+  // The tracks of the frame: the first observation of each.
+  std::unordered_map<int, int> frame_track;
+  for (size_t j = 0; j < observations.size(); ++j)
+    frame_track.emplace(observations[j].track, static_cast<int>(j));
+  // The reference sharing the most tracks.
+  const Reference* best = nullptr;
+  std::vector<std::pair<int, int>> pairs;  // (reference observation, frame observation)
+  for (const Reference& reference : references) {
+    std::vector<std::pair<int, int>> shared;
+    std::unordered_set<int> seen;
+    for (size_t i = 0; i < reference.observations->size(); ++i) {
+      const int track = (*reference.observations)[i].track;
+      const auto it = frame_track.find(track);
+      if (it != frame_track.end() && seen.insert(track).second)
+        shared.emplace_back(static_cast<int>(i), it->second);
+    }
+    if (shared.size() > pairs.size()) {
+      pairs = std::move(shared);
+      best = &reference;
+    }
+  }
+  if (!best || static_cast<int>(pairs.size()) < options.min_relative_matches) return false;
+  std::vector<Eigen::Vector3d> bearings_reference, bearings_frame;
+  for (const auto& [i, j] : pairs) {
+    bearings_reference.push_back(RigBearing((*best->observations)[i]));
+    bearings_frame.push_back(RigBearing(observations[j]));
+  }
+  CentralRelativePoseOptions relative;
+  relative.ransac = options.relative_ransac;
+  Rigid3d reference_from_frame;  // central frames, unit translation
+  const RansacResult ransac = EstimateCentralRelativePose(bearings_reference, bearings_frame,
+                                                          relative, &reference_from_frame);
+  if (!ransac.success || ransac.num_inliers < options.min_relative_inliers) return false;
+  // The scale: the frame's centre is s t in the reference's central frame; each inlier that is
+  // a map point X gives the s that puts X on the frame's ray, and the s most points agree with
+  // wins.
+  const Rigid3d world_from_central_reference(
+      best->world_from_rig.rotation,
+      best->world_from_rig.translation + best->world_from_rig.rotation * central_center);
+  const Rigid3d central_reference_from_world = world_from_central_reference.Inverse();
+  const Eigen::Vector3d t = reference_from_frame.translation.normalized();
+  std::vector<Eigen::Vector3d> in_reference, directions;
+  std::vector<double> scales;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    if (!ransac.inlier_mask[k]) continue;
+    const auto it = track_to_point.find((*best->observations)[pairs[k].first].track);
+    if (it == track_to_point.end() || !points[it->second].alive) continue;
+    const Eigen::Vector3d x = central_reference_from_world * points[it->second].position;
+    const Eigen::Vector3d d = reference_from_frame.rotation * bearings_frame[k];
+    const Eigen::Vector3d td = t.cross(d);
+    if (td.squaredNorm() < 1e-12) continue;
+    const double scale = x.cross(d).dot(td) / td.squaredNorm();
+    if (!(scale > 0.0)) continue;
+    in_reference.push_back(x);
+    directions.push_back(d);
+    scales.push_back(scale);
+  }
+  const double max_cos = std::cos(options.scale_max_angle_error);
+  int best_count = 0;
+  double best_scale = 0.0;
+  for (double scale : scales) {
+    int count = 0;
+    for (size_t k = 0; k < scales.size(); ++k) {
+      const Eigen::Vector3d to_point = in_reference[k] - scale * t;
+      if (to_point.dot(directions[k]) > max_cos * to_point.norm()) ++count;
+    }
+    if (count > best_count) {
+      best_count = count;
+      best_scale = scale;
+    }
+  }
+  spdlog::debug(
+      "relative motion: {} shared tracks, {} inliers, {} of their {} map points agree on the scale",
+      pairs.size(), ransac.num_inliers, best_count, scales.size());
+  if (best_count < options.min_scale_points) return false;
+  const Rigid3d world_from_central_frame =
+      world_from_central_reference * Rigid3d(reference_from_frame.rotation, best_scale * t);
+  motion->world_from_rig = RigFromCentral(world_from_central_frame);
+  motion->inliers = ransac.num_inliers;
+  motion->scale_points = best_count;
+  return true;
 }
 
 void Tracker::Impl::TriangulateNewPoints(int keyframe) {
@@ -787,6 +968,11 @@ FrameResult Tracker::RetryFrame(const std::vector<TrackObservation>& observation
     result.status = "no frame to retry";
     return result;
   }
+  struct RetryScope {
+    bool& retrying;
+    ~RetryScope() { retrying = false; }
+  } scope{impl_->retrying};
+  impl_->retrying = true;
   return impl_->Process(observations, search);
 }
 
@@ -871,7 +1057,10 @@ FrameResult Tracker::Impl::Process(const std::vector<TrackObservation>& observat
   }
   if (initialising && result.tracked) {
     initialised = true;
-    // The frames read while initialising, resected in the new map.
+    // The frames read while initialising, resected in the new map (their own matches: the
+    // threshold of a frame the front end tracked, also when a retry initialised).
+    const bool was_retrying = retrying;
+    retrying = false;
     for (const auto& [earlier, earlier_observations] : init_frames) {
       if (earlier == frame) continue;
       const Resection resection = Resect(earlier_observations);
@@ -883,6 +1072,7 @@ FrameResult Tracker::Impl::Process(const std::vector<TrackObservation>& observat
       late.status = "resected once the map existed";
       revised.push_back({earlier, late});
     }
+    retrying = was_retrying;
     init_frames.clear();
   }
   return result;

@@ -87,6 +87,29 @@ struct TrackerOptions {
   // When the chained tracks do not resect a frame, the map points are searched around the
   // constant-velocity prediction with the search radius times this.
   double predicted_search_radius_scale = 3.0;
+  // Wide baselines without a motion prior (a turn, a low frame rate, after a gap): when the
+  // frame cannot be resected, its 2-D matches with a posed frame (the last tracked frame or one
+  // of the last keyframes, the one sharing the most tracks) give the relative pose (five-point
+  // RANSAC on the rig-axis bearings, the central approximation), its scale the matches that are
+  // map points (a one-parameter consensus within scale_max_angle_error), then the map points are
+  // searched around that pose (the predicted search radius) and the frame resected again; the
+  // resection must pass as any other. At least min_relative_matches shared tracks, of which
+  // min_relative_inliers inliers and min_scale_points agreeing map points. false: off.
+  // When the resection still fails (a map too thin for the new view: every wide step a
+  // keyframe with few points), the relative pose alone is taken with at least
+  // min_relative_inliers_alone inliers and min_scale_points_alone agreeing map points, and the
+  // frame becomes a keyframe, so that its matches with the reference are triangulated.
+  bool relative_pose_fallback = true;
+  int min_relative_inliers_alone = 50;
+  int min_scale_points_alone = 8;
+  // RetryFrame's resections (observations matched by descriptors: corners detected again in
+  // another view, a pixel or so off, not followed windows) count inliers within
+  // resection_ransac.max_angle_error times this.
+  double retry_angle_error_scale = 3.0;
+  int min_relative_matches = 30;
+  int min_relative_inliers = 20;
+  int min_scale_points = 6;
+  double scale_max_angle_error = 0.01;
   // After the search, resect the frame again with the re-observations (a second RANSAC).
   bool resect_after_search = true;
   // Whether the points the search found count as tracked in the keyframe decision.

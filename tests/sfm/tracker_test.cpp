@@ -180,6 +180,84 @@ TEST(TrackerFailures, ReportsSkipsAndRecoversWithoutAWrongPose) {
   EXPECT_LT(worst, 0.03 * drive.length);
 }
 
+// The relative-motion fallback of RetryFrame: frame 40 keeps only 12 of its matches with a map
+// point (too few to resect it), and 80 matches with the last tracked frame whose tracks have no
+// map point yet (fresh track ids in frames 39 and 40). Its pose comes from the relative motion
+// to frame 39 with the scale of the 12 map points, and it becomes a keyframe; with those 12
+// matches wrong (shuffled among other points), no scale is agreed on and the frame is not
+// tracked.
+struct RelativeFallbackRun {
+  FrameResult first, retry;
+  Rigid3d previous, before_previous;  // frames 39 and 38 as tracked
+};
+RelativeFallbackRun RunRelativeFallback(const SyntheticDrive& drive, bool wrong_map_points) {
+  Tracker tracker(drive.rig, TrackerOptions());
+  RelativeFallbackRun run;
+  constexpr int kFrame = 40, kFresh = 1000000;
+  // Points seen in frames 39 and 40: 80 of them get fresh tracks in both frames.
+  std::set<int> seen39, shared;
+  for (const TrackObservation& o : drive.frames[kFrame - 1]) seen39.insert(o.track);
+  for (const TrackObservation& o : drive.frames[kFrame])
+    if (seen39.count(o.track) && shared.size() < 80) shared.insert(o.track);
+  for (int f = 0; f < kFrame; ++f) {
+    std::vector<TrackObservation> observations = drive.frames[f];
+    if (f == kFrame - 1)
+      for (TrackObservation& o : observations)
+        if (shared.count(o.track)) o.track += kFresh;
+    const FrameResult result = tracker.AddFrame(observations);
+    if (f == kFrame - 2) run.before_previous = result.world_from_rig;
+    if (f == kFrame - 1) run.previous = result.world_from_rig;
+  }
+  std::vector<TrackObservation> observations;
+  std::vector<TrackObservation> map_points;
+  Eigen::Vector3d position;
+  for (const TrackObservation& o : drive.frames[kFrame]) {
+    if (shared.count(o.track)) {
+      observations.push_back({o.track + kFresh, o.camera, o.bearing});
+    } else if (map_points.size() < 12 && tracker.TrackPosition(o.track, &position)) {
+      map_points.push_back(o);
+    }
+  }
+  if (wrong_map_points) {
+    // Each keeps its bearing but names another map point.
+    std::vector<int> tracks;
+    for (const TrackObservation& o : map_points) tracks.push_back(o.track);
+    std::rotate(tracks.begin(), tracks.begin() + 1, tracks.end());
+    for (size_t i = 0; i < map_points.size(); ++i) map_points[i].track = tracks[i];
+  }
+  observations.insert(observations.end(), map_points.begin(), map_points.end());
+  run.first = tracker.AddFrame(observations);
+  run.retry = tracker.RetryFrame(observations);
+  return run;
+}
+
+TEST(TrackerRelativeFallback, PosesAFrameWithTooFewMapPointsFromItsRelativeMotion) {
+  // A central rig: the relative pose is the central five-point (on a real drive the step is
+  // metres, the camera offsets centimetres; here the step is 15 cm).
+  const SyntheticDrive drive = MakeDrive(0.0, 45, 0.0003, 0.0);
+  const RelativeFallbackRun run = RunRelativeFallback(drive, false);
+  EXPECT_FALSE(run.first.tracked) << run.first.status;
+  ASSERT_TRUE(run.retry.tracked) << run.retry.status;
+  EXPECT_TRUE(run.retry.keyframe) << run.retry.status;
+  EXPECT_NE(run.retry.status.find("relative motion"), std::string::npos) << run.retry.status;
+  // The step from frame 39 against the truth, in the map's scale (the step 38 to 39).
+  const double scale =
+      (run.previous.translation - run.before_previous.translation).norm() /
+      (drive.world_from_rig[39].translation - drive.world_from_rig[38].translation).norm();
+  const Rigid3d step = run.previous.Inverse() * run.retry.world_from_rig;
+  const Rigid3d true_step = drive.world_from_rig[39].Inverse() * drive.world_from_rig[40];
+  EXPECT_LT((step.translation / scale - true_step.translation).norm(), 0.02)
+      << "of a " << true_step.translation.norm() << " m step";
+  EXPECT_LT(RotationAngleBetween(step.rotation, true_step.rotation) * 180.0 / M_PI, 0.2);
+}
+
+TEST(TrackerRelativeFallback, RefusesAScaleThatTheMapPointsDoNotAgreeOn) {
+  const SyntheticDrive drive = MakeDrive(0.0, 45, 0.0003, 0.0);
+  const RelativeFallbackRun run = RunRelativeFallback(drive, true);
+  EXPECT_FALSE(run.first.tracked) << run.first.status;
+  EXPECT_FALSE(run.retry.tracked) << run.retry.status;
+}
+
 // Before the initialisation there is no prediction; afterwards the constant-velocity
 // prediction of the next frame is close to its true pose (in the map's scale), and it is
 // withdrawn after a frame that was not tracked.

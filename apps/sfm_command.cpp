@@ -71,7 +71,8 @@ void RunSfmCommand(SfmCommandOptions& o, const GlobalOptions& global) {
   SfmOutputOptions output_options;
   output_options.frame_rate = o.sfm.frame_rate;
   const SfmOutputs outputs = WriteSfmOutputs(drive, run, out, output_options);
-  const nlohmann::json summary = SfmSummaryJson(drive, run, outputs, o.sfm.sfm.tracker.central);
+  nlohmann::json summary = SfmSummaryJson(drive, run, outputs, o.sfm.sfm.tracker.central);
+  summary["frame_rate"] = o.sfm.frame_rate;
   WriteTextFileAtomically(out / "sfm.json", summary.dump(2) + "\n");
   folder.Keep();
   const SfmStats& stats = outputs.stats;

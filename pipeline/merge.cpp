@@ -585,9 +585,11 @@ std::optional<MergeSegment> LoadMergeSegment(const fs::path& folder, std::string
                : "missing: no such folder";
     return std::nullopt;
   }
-  const fs::path summary_path = folder / "reconstruct.json";
+  // A reconstruction (reconstruct.json) or an SfM run (sfm.json: the same map, no surface).
+  fs::path summary_path = folder / "reconstruct.json";
+  if (!fs::exists(summary_path)) summary_path = folder / "sfm.json";
   if (!fs::exists(summary_path)) {
-    *why = "not a complete reconstruction (no reconstruct.json)";
+    *why = "not a complete reconstruction (no reconstruct.json nor sfm.json)";
     return std::nullopt;
   }
   try {

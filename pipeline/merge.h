@@ -1,8 +1,9 @@
 #pragma once
 // `omnisculpt merge` (docs/design.md §12): reconstructions of segments of drives, made apart
 // (`reconstruct --frames A:B`, one cluster task each), brought into one map. Each input is a
-// reconstruction folder (reconstruct.json, sparse/, frame_poses.tum, poses.tum) whose drive is
-// still reachable (the frames' names and timestamps come from it). Two segments of one drive
+// reconstruction folder (reconstruct.json, sparse/, frame_poses.tum, poses.tum; or the folder
+// of an `sfm` run, with sfm.json) whose drive is still reachable (the frames' names,
+// timestamps and images come from it). Two segments of one drive
 // that share frames are aligned by a similarity from those frames' poses, checked frame by frame
 // (rotation and centre residuals); the similarities go into one pose graph over the segments
 // (sfm/pose_graph.h), solved with the largest segment fixed. The merged model keeps, for every

@@ -149,6 +149,32 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   EXPECT_EQ(again.exit_code, 2) << again.err;
 }
 
+// `sfm` runs (sfm.json, no surface of their own) merge as reconstructions do.
+TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
+  const fs::path scratch = ScratchDir("sfm_runs");
+  std::string error;
+  const fs::path drive = testing::ShortDrive(&error);
+  ASSERT_FALSE(drive.empty()) << error;
+  for (const auto& [range, name] :
+       {std::pair<std::string, std::string>{"0:40", "a"}, {"30:70", "b"}}) {
+    const auto result = RunOmnisculpt(
+        {"--quiet", "sfm", drive.string(), "--frames", range, "--out", (scratch / name).string()},
+        scratch);
+    ASSERT_EQ(result.exit_code, 0) << range << ": " << result.err;
+  }
+  const fs::path city = scratch / "city";
+  const auto merged = RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(),
+                                     (scratch / "b").string(), "--out", city.string()},
+                                    scratch);
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  const nlohmann::json summary = ReadJson(city / "merge.json");
+  EXPECT_EQ(summary["status"], "usable") << summary.dump(2);
+  ASSERT_EQ(summary["overlaps"].size(), 1u) << summary.dump(2);
+  EXPECT_TRUE(summary["overlaps"][0]["verified"].get<bool>());
+  EXPECT_EQ(summary["overlaps"][0]["shared_frames"], 10);
+  EXPECT_LT(PoseRms(city, drive), 0.01 * 40.0);  // under 1 % of the ~40 m driven
+}
+
 // The drive's loop cut into two segments whose only link at the loop is a revisit (frames
 // 113-129 see the place of frames 0-13): the merge finds it, fuses the matched points, and the
 // merged map is as good as one run that closed the loop itself.

@@ -488,6 +488,11 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
         if (has_colors) {
           Eigen::Matrix<uint8_t, 3, 1> color;
           for (int c = 0; c < 3; ++c) {
+            if (!std::isfinite(row[*rgb[c]])) {
+              std::ostringstream problem;
+              problem << "vertex " << item << ": expected a finite colour, got " << row[*rgb[c]];
+              reader.Fail(problem.str());
+            }
             color[c] = ToColorByte(row[*rgb[c]], element.properties[*rgb[c]].type);
           }
           content.colors.push_back(color);

@@ -384,6 +384,24 @@ TEST(Ply, NonFiniteCoordinatesAreRejected) {
   EXPECT_TRUE(Contains(MeshError(path), "number out of range (too large for a double): \"1e309\""));
 }
 
+// A real-valued colour that is not finite (a binary NaN) is refused, not cast.
+TEST(Ply, NonFiniteColoursAreRejected) {
+  TempDir dir;
+  const auto path = dir / "nan_colour.ply";
+  for (const float value :
+       {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    std::string bytes =
+        "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n"
+        "property float y\nproperty float z\nproperty float red\nproperty float green\n"
+        "property float blue\nend_header\n";
+    for (const float v : {0.0f, 1.0f, 2.0f, 0.5f, value, 0.5f}) Put(v, false, &bytes);
+    WriteBytes(path, bytes);
+    EXPECT_TRUE(Contains(MeshError(path),
+                         path.string() + ": element vertex: vertex 0: expected a finite colour"))
+        << value << ": " << MeshError(path);
+  }
+}
+
 TEST(Ply, AsciiIntegersMustFitTheirType) {
   TempDir dir;
   const auto path = dir / "ints.ply";

@@ -140,12 +140,9 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   }
   const std::vector<KeyframeStats> last_stats = sculptor.Finish();
   stats.insert(stats.end(), last_stats.begin(), last_stats.end());
-  std::vector<PointId> closed_points, observed_points;
-  TriangleMesh closed = sculptor.ExtractMesh(&closed_points);
-  ObservedMeshStats observed_stats;
-  TriangleMesh mesh = sculptor.ExtractObservedMesh(&observed_points, &observed_stats);
-  ColorMeshVertices(closed_points, point_colors, &closed);
-  ColorMeshVertices(observed_points, point_colors, &mesh);
+  ColoredSurfaces surfaces = ExtractColoredSurfaces(sculptor, point_colors);
+  const TriangleMesh& closed = surfaces.closed;
+  const TriangleMesh& mesh = surfaces.observed;
   if (!closed.triangles.empty()) {
     WritePlyMesh(mesh, out / "surface.ply");
     WritePlyMesh(closed, out / "surface_closed.ply");

@@ -25,6 +25,7 @@
 #include "calib/tum.h"
 #include "pipeline/colmap_keyframes.h"
 #include "pipeline/gt_keyframes.h"
+#include "pipeline/point_colors.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -115,12 +116,10 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
 
   std::filesystem::create_directories(out / "stats");
   // The closed δO and its observed part, each vertex coloured as its point.
-  std::vector<PointId> closed_points, observed_points;
-  TriangleMesh closed = sculptor.ExtractMesh(&closed_points);
-  ObservedMeshStats observed_stats;
-  TriangleMesh mesh = sculptor.ExtractObservedMesh(&observed_points, &observed_stats);
-  ColorMeshVertices(closed_points, point_colors, &closed);
-  ColorMeshVertices(observed_points, point_colors, &mesh);
+  const ColoredSurfaces surfaces = ExtractColoredSurfaces(sculptor, point_colors);
+  const TriangleMesh& closed = surfaces.closed;
+  const TriangleMesh& mesh = surfaces.observed;
+  const ObservedMeshStats& observed_stats = surfaces.observed_stats;
   WritePlyMesh(mesh, out / "surface.ply");
   WritePlyMesh(closed, out / "surface_closed.ply");
   std::ostringstream csv;

@@ -132,4 +132,15 @@ std::vector<Rgb8> ColorPoints(const Rig& rig, const std::vector<FinalizedKeyfram
   return colors;
 }
 
+ColoredSurfaces ExtractColoredSurfaces(const IncrementalSculptor& sculptor,
+                                       const std::unordered_map<PointId, Rgb8>& point_colors) {
+  ColoredSurfaces surfaces;
+  std::vector<PointId> closed_points, observed_points;
+  surfaces.closed = sculptor.ExtractMesh(&closed_points);
+  surfaces.observed = sculptor.ExtractObservedMesh(&observed_points, &surfaces.observed_stats);
+  ColorMeshVertices(closed_points, point_colors, &surfaces.closed);
+  ColorMeshVertices(observed_points, point_colors, &surfaces.observed);
+  return surfaces;
+}
+
 }  // namespace omni

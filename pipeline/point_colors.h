@@ -10,11 +10,13 @@
 #include <functional>
 #include <opencv2/core.hpp>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "calib/ply.h"
 #include "calib/rig.h"
 #include "sfm/tracker.h"
+#include "surface/sculptor.h"
 
 namespace omni {
 
@@ -44,6 +46,16 @@ using RgbImageLoader = std::function<cv::Mat(int frame, int camera)>;
 std::vector<Rgb8> ColorPoints(const Rig& rig, const std::vector<FinalizedKeyframe>& keyframes,
                               const RgbImageLoader& load_rgb, const PointColorOptions& options = {},
                               PointColorStats* stats = nullptr);
+
+// A sculptor's two surfaces, each vertex coloured as its point (ColorMeshVertices of
+// surface/sculptor.h; grey for a Steiner vertex or a point without a colour): the closed δO
+// (surface_closed.ply) and its observed part (surface.ply).
+struct ColoredSurfaces {
+  TriangleMesh closed, observed;
+  ObservedMeshStats observed_stats;
+};
+ColoredSurfaces ExtractColoredSurfaces(const IncrementalSculptor& sculptor,
+                                       const std::unordered_map<PointId, Rgb8>& point_colors);
 
 // Bilinear sample of an 8-bit RGB image at a pixel (integer coordinates at pixel centres, as
 // calib), the border pixels repeated outside.

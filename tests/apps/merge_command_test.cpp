@@ -29,6 +29,14 @@ fs::path ScratchDir(const std::string& name) { return testing::ScratchDir("merge
 
 nlohmann::json ReadJson(const fs::path& path) { return nlohmann::json::parse(ReadTextFile(path)); }
 
+// `omnisculpt COMMAND DRIVE --frames RANGE --out OUT` (reconstruct or sfm), which must succeed.
+void RunSegment(const fs::path& drive, const std::string& range, const fs::path& out,
+                const fs::path& scratch, const std::string& command = "reconstruct") {
+  const auto result = RunOmnisculpt(
+      {"--quiet", command, drive.string(), "--frames", range, "--out", out.string()}, scratch);
+  ASSERT_EQ(result.exit_code, 0) << command << " " << range << ": " << result.err;
+}
+
 TEST(MergeCommandShortDrive, RefusesABadFrameRangeAndNothingToMerge) {
   const fs::path scratch = ScratchDir("bad_input");
   std::string error;
@@ -60,16 +68,11 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   std::string error;
   const fs::path drive = testing::ShortDrive(&error);
   ASSERT_FALSE(drive.empty()) << error;
-  const auto reconstruct = [&](const std::string& range, const std::string& name) {
-    const auto result = RunOmnisculpt({"--quiet", "reconstruct", drive.string(), "--frames", range,
-                                       "--out", (scratch / name).string()},
-                                      scratch);
-    EXPECT_EQ(result.exit_code, 0) << range << ": " << result.err;
-  };
-  reconstruct("0:50", "a");
-  reconstruct("40:90", "b");
-  reconstruct("0:90", "whole");
-  reconstruct("95:110", "apart");
+  for (const auto& [range, name] : {std::pair<std::string, std::string>{"0:50", "a"},
+                                    {"40:90", "b"},
+                                    {"0:90", "whole"},
+                                    {"95:110", "apart"}})
+    RunSegment(drive, range, scratch / name, scratch);
   // The segment's frames keep the drive's names and times.
   const nlohmann::json b = ReadJson(scratch / "b" / "reconstruct.json");
   EXPECT_EQ(b["frame_range"]["first"], 40);
@@ -155,13 +158,8 @@ TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
   std::string error;
   const fs::path drive = testing::ShortDrive(&error);
   ASSERT_FALSE(drive.empty()) << error;
-  for (const auto& [range, name] :
-       {std::pair<std::string, std::string>{"0:40", "a"}, {"30:70", "b"}}) {
-    const auto result = RunOmnisculpt(
-        {"--quiet", "sfm", drive.string(), "--frames", range, "--out", (scratch / name).string()},
-        scratch);
-    ASSERT_EQ(result.exit_code, 0) << range << ": " << result.err;
-  }
+  RunSegment(drive, "0:40", scratch / "a", scratch, "sfm");
+  RunSegment(drive, "30:70", scratch / "b", scratch, "sfm");
   const fs::path city = scratch / "city";
   const auto merged = RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(),
                                      (scratch / "b").string(), "--out", city.string()},
@@ -184,12 +182,8 @@ TEST(MergeCommandShortDrive, ALoopCutIntoSegmentsClosesInTheMerge) {
   const fs::path drive = testing::ShortDrive(&error);
   ASSERT_FALSE(drive.empty()) << error;
   for (const auto& [range, name] :
-       {std::pair<std::string, std::string>{"0:70", "first"}, {"55:", "second"}, {"0:", "whole"}}) {
-    const auto result = RunOmnisculpt({"--quiet", "reconstruct", drive.string(), "--frames", range,
-                                       "--out", (scratch / name).string()},
-                                      scratch);
-    ASSERT_EQ(result.exit_code, 0) << range << ": " << result.err;
-  }
+       {std::pair<std::string, std::string>{"0:70", "first"}, {"55:", "second"}, {"0:", "whole"}})
+    RunSegment(drive, range, scratch / name, scratch);
   const nlohmann::json whole = ReadJson(scratch / "whole" / "reconstruct.json");
   ASSERT_FALSE(whole["loop_closures"].empty()) << "the single run closes the loop itself";
   const fs::path city = scratch / "city";
@@ -231,15 +225,8 @@ TEST(MergeCommandShortDrive, TwoDrivesAreJoinedWhereTheyPassTheSamePlaces) {
   fs::create_directories(other);
   fs::create_directory_symlink(drive / "images", other / "images");
   fs::copy_file(drive / "rig.json", other / "rig.json");
-  const auto reconstruct = [&](const fs::path& folder, const std::string& range,
-                               const std::string& name) {
-    const auto result = RunOmnisculpt({"--quiet", "reconstruct", folder.string(), "--frames", range,
-                                       "--out", (scratch / name).string()},
-                                      scratch);
-    ASSERT_EQ(result.exit_code, 0) << range << ": " << result.err;
-  };
-  reconstruct(drive, "0:70", "first");
-  reconstruct(other, "50:", "second");
+  RunSegment(drive, "0:70", scratch / "first", scratch);
+  RunSegment(other, "50:", scratch / "second", scratch);
   const fs::path city = scratch / "city";
   const auto merged = RunOmnisculpt({"--quiet", "merge", (scratch / "first").string(),
                                      (scratch / "second").string(), "--out", city.string()},

@@ -25,20 +25,35 @@ namespace {
 
 constexpr double kDegree = M_PI / 180.0;
 
-// Timestamps as poses.tum writes them (9 decimals), as an exact key.
-long long TimeKey(double seconds) { return std::llround(seconds * 1e6); }
-
+// The poses of a TUM file by frame: each timestamp is the drive's nearest frame time, within a
+// quarter of the frames' spacing there (the file has 9 decimals; a clock of epoch seconds keeps
+// fewer significant digits in a double, so the times are not compared exactly).
 std::map<size_t, StampedPose> PosesByFrame(const std::vector<StampedPose>& poses,
-                                           const std::unordered_map<long long, size_t>& frame_of,
+                                           const std::vector<double>& frame_times,
                                            const fs::path& file) {
   std::map<size_t, StampedPose> by_frame;
   for (const StampedPose& pose : poses) {
-    const auto it = frame_of.find(TimeKey(pose.timestamp));
-    if (it == frame_of.end())
+    const auto after = std::lower_bound(frame_times.begin(), frame_times.end(), pose.timestamp);
+    size_t best = frame_times.size();
+    double tolerance = 0.0;
+    for (auto it : {after, after == frame_times.begin() ? after : std::prev(after)}) {
+      if (it == frame_times.end()) continue;
+      const size_t i = static_cast<size_t>(it - frame_times.begin());
+      if (best == frame_times.size() ||
+          std::abs(*it - pose.timestamp) < std::abs(frame_times[best] - pose.timestamp))
+        best = i;
+    }
+    if (best < frame_times.size()) {
+      double spacing = 1.0;
+      if (best + 1 < frame_times.size()) spacing = frame_times[best + 1] - frame_times[best];
+      if (best > 0) spacing = std::min(spacing, frame_times[best] - frame_times[best - 1]);
+      tolerance = 0.25 * spacing;
+    }
+    if (best == frame_times.size() || !(std::abs(frame_times[best] - pose.timestamp) <= tolerance))
       throw InputError(
           file, "",
           "timestamp " + std::to_string(pose.timestamp) + " is the time of no frame of the drive");
-    by_frame[it->second] = pose;
+    by_frame[best] = pose;
   }
   return by_frame;
 }
@@ -617,11 +632,11 @@ std::optional<MergeSegment> LoadMergeSegment(const fs::path& folder, std::string
       segment.last_frame = summary["frame_range"]["last"].get<size_t>();
     }
     const double frame_rate = summary.value("frame_rate", 15.0);
-    std::unordered_map<long long, size_t> frame_of_time;
-    for (size_t i = 0; i < drive.NumFrames(); ++i) {
-      const double t = drive.HasTimestamps() ? drive.FrameTimestamp(i) : i / frame_rate;
-      frame_of_time[TimeKey(t)] = i;
-    }
+    // The frames' times as the run wrote them (frames.csv's, else frame / frame_rate); they
+    // increase (calib/drive.h).
+    std::vector<double> frame_of_time;
+    for (size_t i = 0; i < drive.NumFrames(); ++i)
+      frame_of_time.push_back(drive.HasTimestamps() ? drive.FrameTimestamp(i) : i / frame_rate);
     segment.frame_poses = PosesByFrame(ReadTum(folder / "frame_poses.tum"), frame_of_time,
                                        folder / "frame_poses.tum");
     segment.keyframe_poses =

@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -171,6 +173,52 @@ TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
   EXPECT_TRUE(summary["overlaps"][0]["verified"].get<bool>());
   EXPECT_EQ(summary["overlaps"][0]["shared_frames"], 10);
   EXPECT_LT(PoseRms(city, drive), 0.01 * 40.0);  // under 1 % of the ~40 m driven
+}
+
+// A drive with its own clock (frames.csv in epoch seconds with nanoseconds, as the real sets
+// of ../shared/data/real have): the segments' poses carry those times, which a double holds
+// to about 0.2 µs only, and the merge still finds each frame (shared frames, poses by frame).
+TEST(MergeCommandShortDrive, SegmentsOfADriveWithItsOwnClockMerge) {
+  const fs::path scratch = ScratchDir("own_clock");
+  std::string error;
+  const fs::path drive = testing::ShortDrive(&error);
+  ASSERT_FALSE(drive.empty()) << error;
+  const fs::path clocked = scratch / "clocked_drive";
+  fs::create_directories(clocked);
+  fs::create_directory_symlink(drive / "images", clocked / "images");
+  fs::copy_file(drive / "rig.json", clocked / "rig.json");
+  {
+    std::ofstream csv(clocked / "frames.csv");
+    csv << "frame,camera,timestamp_s\n";
+    for (int f = 0; f < 130; ++f) {
+      char name[16], time[64];
+      std::snprintf(name, sizeof(name), "%06d", f);
+      // 1646304541.927203655 + f / 15 s, written to the nanosecond.
+      const long long ns = 927203655LL + f * 1000000000LL / 15;
+      std::snprintf(time, sizeof(time), "%lld.%09lld", 1646304541LL + ns / 1000000000LL,
+                    ns % 1000000000LL);
+      for (int c = 0; c < 6; ++c) csv << name << ",cam" << c << "," << time << "\n";
+    }
+  }
+  RunSegment(clocked, "0:40", scratch / "a", scratch);
+  RunSegment(clocked, "30:70", scratch / "b", scratch);
+  const fs::path city = scratch / "city";
+  const auto merged = RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(),
+                                     (scratch / "b").string(), "--out", city.string()},
+                                    scratch);
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  const nlohmann::json summary = ReadJson(city / "merge.json");
+  EXPECT_EQ(summary["status"], "usable") << summary.dump(2);
+  ASSERT_GE(summary["overlaps"].size(), 1u) << summary.dump(2);
+  EXPECT_EQ(summary["overlaps"][0]["kind"], "shared frames");
+  EXPECT_TRUE(summary["overlaps"][0]["verified"].get<bool>());
+  EXPECT_EQ(summary["overlaps"][0]["shared_frames"], 10);
+  // The merged frames carry the drive's clock, once each, in order.
+  const auto frames = ReadTum(city / "frame_poses.tum");
+  ASSERT_EQ(frames.size(), 70u);
+  EXPECT_NEAR(frames.front().timestamp, 1646304541.927203655, 1e-6);
+  for (size_t i = 1; i < frames.size(); ++i)
+    EXPECT_NEAR(frames[i].timestamp - frames[i - 1].timestamp, 1.0 / 15.0, 1e-6) << i;
 }
 
 // The drive's loop cut into two segments whose only link at the loop is a revisit (frames

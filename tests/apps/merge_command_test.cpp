@@ -39,6 +39,15 @@ void RunSegment(const fs::path& drive, const std::string& range, const fs::path&
   ASSERT_EQ(result.exit_code, 0) << command << " " << range << ": " << result.err;
 }
 
+// Another drive folder made of `drive`'s images and rig (the images linked, not copied): the
+// same pictures under another name, so the merge takes it for another drive.
+fs::path DriveSharingImages(const fs::path& drive, const fs::path& folder) {
+  fs::create_directories(folder);
+  fs::create_directory_symlink(drive / "images", folder / "images");
+  fs::copy_file(drive / "rig.json", folder / "rig.json");
+  return folder;
+}
+
 TEST(MergeCommandShortDrive, RefusesABadFrameRangeAndNothingToMerge) {
   const fs::path scratch = ScratchDir("bad_input");
   std::string error;
@@ -183,10 +192,7 @@ TEST(MergeCommandShortDrive, SegmentsOfADriveWithItsOwnClockMerge) {
   std::string error;
   const fs::path drive = testing::ShortDrive(&error);
   ASSERT_FALSE(drive.empty()) << error;
-  const fs::path clocked = scratch / "clocked_drive";
-  fs::create_directories(clocked);
-  fs::create_directory_symlink(drive / "images", clocked / "images");
-  fs::copy_file(drive / "rig.json", clocked / "rig.json");
+  const fs::path clocked = DriveSharingImages(drive, scratch / "clocked_drive");
   {
     std::ofstream csv(clocked / "frames.csv");
     csv << "frame,camera,timestamp_s\n";
@@ -269,10 +275,7 @@ TEST(MergeCommandShortDrive, TwoDrivesAreJoinedWhereTheyPassTheSamePlaces) {
   std::string error;
   const fs::path drive = testing::ShortDrive(&error);
   ASSERT_FALSE(drive.empty()) << error;
-  const fs::path other = scratch / "other_drive";
-  fs::create_directories(other);
-  fs::create_directory_symlink(drive / "images", other / "images");
-  fs::copy_file(drive / "rig.json", other / "rig.json");
+  const fs::path other = DriveSharingImages(drive, scratch / "other_drive");
   RunSegment(drive, "0:70", scratch / "first", scratch);
   RunSegment(other, "50:", scratch / "second", scratch);
   const fs::path city = scratch / "city";

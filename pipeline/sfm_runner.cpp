@@ -333,6 +333,9 @@ SfmRunResult SfmRunner::Finish() {
                  result.frames[run.first].name, result.frames[run.last].name,
                  run.last - run.first + 1, result.frames[run.last + 1].name);
   }
+  result.scale_source = s.tracker.ScaleSource();
+  result.metric_scale = s.tracker.MetricScale();
+  if (!result.scale_source.empty()) spdlog::info("sfm: scale {}", result.scale_source);
   const size_t read = result.frames_total - result.skipped.size();
   const size_t lost_tail = result.frames_total - std::min(result.lost_from, result.frames_total);
   if (!s.tracker.Initialised()) {

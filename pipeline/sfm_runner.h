@@ -123,6 +123,9 @@ struct SfmRunResult {
   std::vector<SfmUntrackedRun> untracked_runs;  // after the first tracked frame
   SfmOutcome outcome = SfmOutcome::kNotInitialised;
   std::string outcome_reason;  // one line: what happened, for stderr and the run's summary
+  // Where the map's scale comes from (Tracker::ScaleSource), and whether it is in metres.
+  std::string scale_source;
+  bool metric_scale = false;
 
   // Wall seconds of the SfM thread: waiting for decoded images, the front end, the tracker's
   // stages, loop detection and correction, and the whole run.

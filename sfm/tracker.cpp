@@ -33,6 +33,7 @@ std::string TrackerOptions::Check() const {
   if (min_init_points < 5) return "min_init_points: expected at least 5";
   if (max_init_frames < 1) return "max_init_frames: expected at least 1";
   if (min_stereo_points < 5) return "min_stereo_points: expected at least 5";
+  if (min_stereo_scale_points < 3) return "min_stereo_scale_points: expected at least 3";
   if (!(stereo_min_ray_angle > 0.0))
     return "stereo_min_ray_angle: expected a positive angle (radians)";
   if (min_resection_inliers < 4) return "min_resection_inliers: expected at least 4";
@@ -118,6 +119,8 @@ struct Tracker::Impl {
   bool initialised = false;
   bool retrying = false;         // in RetryFrame: observations matched by descriptors
   bool map_from_stereo = false;  // the map started from the first keyframe's stereo points
+  std::string scale_source;      // Tracker::ScaleSource
+  bool metric_scale = false;
   double travelled = 0.0;
   int travelled_steps = 0;
   Tracker::Timings timings;
@@ -197,6 +200,14 @@ struct Tracker::Impl {
   }
 
   FrameResult Initialise(const std::vector<TrackObservation>& observations);
+  // A stereo map of one keyframe that the frames after it could not be resected from
+  // (TrackerOptions::stereo_map_fallback).
+  bool ThinStereoMap() const {
+    return options.stereo_map_fallback && map_from_stereo && keyframes.size() == 1;
+  }
+  // The two-frame initialisation in place of a thin stereo map, scaled by the stereo points
+  // both share; the stereo map is kept when it fails.
+  FrameResult InitialiseOverStereoMap(const std::vector<TrackObservation>& observations);
   // The frame num_frames - 1 becomes the first keyframe (a new start: the map so far is
   // dropped); in non-central mode its stereo tracks may give the map at once.
   FrameResult StartMap(const std::vector<TrackObservation>& observations);
@@ -295,6 +306,7 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
   struct Candidate {
     Rigid3d world_from_rig1;
     std::vector<std::pair<int, Eigen::Vector3d>> points;
+    bool metric = false;  // the generalised solution: the offsets give the scale
   };
   std::vector<Candidate> candidates;
   {
@@ -315,7 +327,7 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
     Rigid3d rig0_from_rig1;
     const RansacResult ransac = EstimateNoncentralRelativePose(rig, bearings0, cameras0, bearings1,
                                                                cameras1, relative, &rig0_from_rig1);
-    if (ransac.success) candidates.push_back({rig0_from_rig1, {}});
+    if (ransac.success) candidates.push_back({rig0_from_rig1, {}, true});
   }
   Candidate* best = nullptr;
   for (Candidate& candidate : candidates) {
@@ -337,6 +349,11 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
   if (!best || static_cast<int>(best->points.size()) < options.min_init_points) return result;
   const Rigid3d world_from_rig1 = best->world_from_rig1;
   const std::vector<std::pair<int, Eigen::Vector3d>>& new_points = best->points;
+  metric_scale = best->metric;
+  scale_source = best->metric ? "metric (the rig's offsets: generalised relative pose of the "
+                                "first two keyframes)"
+                              : "arbitrary (two-frame initialisation: the direction of the "
+                                "motion only; the length of the first step is 1)";
 
   Keyframe keyframe1;
   keyframe1.frame = num_frames - 1;
@@ -535,6 +552,10 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   if (!resection.ok) {
     result.status = "resection failed: " + std::to_string(resection.ransac.num_inliers) +
                     " inliers of " + std::to_string(resection.bearings.size());
+    if (ThinStereoMap()) {
+      FrameResult initialised_again = InitialiseOverStereoMap(input_observations);
+      if (initialised_again.tracked) return initialised_again;
+    }
     return result;
   }
   // A pose far from the motion model is a wrong resection (wrong matches that agree), not a
@@ -947,7 +968,7 @@ FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations,
   const int frame = s.num_frames - 1;
   // A new start when the first keyframe cannot be initialised from (see max_init_frames).
   const bool restart =
-      !s.keyframes.empty() && !s.initialised &&
+      !s.keyframes.empty() && (!s.initialised || s.ThinStereoMap()) &&
       (frame - s.keyframes[0].frame > s.options.max_init_frames ||
        static_cast<int>(s.keyframes[0].observations.size()) < s.options.min_init_points);
   if (s.keyframes.empty() || restart) return s.StartMap(observations);
@@ -992,6 +1013,8 @@ FrameResult Tracker::Impl::StartMap(const std::vector<TrackObservation>& observa
   travelled_steps = 0;
   initialised = false;
   map_from_stereo = false;
+  metric_scale = false;
+  scale_source.clear();
   Keyframe keyframe;
   keyframe.frame = frame;
   keyframe.observations = observations;
@@ -1007,6 +1030,9 @@ FrameResult Tracker::Impl::StartMap(const std::vector<TrackObservation>& observa
     if (stereo_points >= options.min_stereo_points) {
       initialised = true;
       map_from_stereo = true;
+      metric_scale = true;
+      scale_source = "metric (the rig's stereo baseline: " + std::to_string(stereo_points) +
+                     " points of the first keyframe)";
       result.inliers = stereo_points;
       result.status = "initialised from the rig's stereo baseline";
     } else {
@@ -1043,10 +1069,89 @@ int Tracker::Impl::TriangulateStereo() {
   return count;
 }
 
+FrameResult Tracker::Impl::InitialiseOverStereoMap(
+    const std::vector<TrackObservation>& observations) {
+  // The stereo map, kept to be restored, and its positions by track (the scale's reference).
+  std::vector<Point> stereo_points = points;
+  std::unordered_map<int, int> stereo_track_to_point = track_to_point;
+  std::vector<int> stereo_pending = pending;
+  std::vector<int> stereo_stamp = point_stamp;
+  const std::string stereo_scale_source = scale_source;
+  ClearPoints();
+  map_from_stereo = false;
+  FrameResult result = Initialise(observations);
+  if (!result.tracked) {
+    points = std::move(stereo_points);
+    track_to_point = std::move(stereo_track_to_point);
+    pending = std::move(stereo_pending);
+    point_stamp = std::move(stereo_stamp);
+    map_from_stereo = true;
+    metric_scale = true;
+    scale_source = stereo_scale_source;
+    return result;
+  }
+  // The scale: each new point that is also a stereo point gives the ratio of its two distances
+  // from the first keyframe's camera that saw it; the median, if enough ratios agree with it.
+  const Keyframe& keyframe0 = keyframes[0];
+  std::vector<double> ratios;
+  for (const Point& point : points) {
+    const auto it = stereo_track_to_point.find(point.track);
+    if (it == stereo_track_to_point.end() || point.observations.empty()) continue;
+    const PointObservation& first = point.observations.front();
+    const Eigen::Vector3d center =
+        Ray(keyframe0.world_from_rig, first.camera, first.bearing).center;
+    const double temporal = (point.position - center).norm();
+    const double stereo = (stereo_points[it->second].position - center).norm();
+    if (temporal > 0.0 && std::isfinite(stereo)) ratios.push_back(stereo / temporal);
+  }
+  double scale = 0.0;
+  int agreeing = 0;
+  if (!ratios.empty()) {
+    std::vector<double> sorted = ratios;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    scale = sorted[sorted.size() / 2];
+    for (double ratio : ratios) agreeing += std::abs(ratio / scale - 1.0) < 0.2;
+    std::sort(sorted.begin(), sorted.end());
+    spdlog::debug("stereo scale: {} shared points, ratios q10 {} q50 {} q90 {}, {} agree",
+                  sorted.size(), sorted[sorted.size() / 10], scale, sorted[9 * sorted.size() / 10],
+                  agreeing);
+  }
+  if (agreeing < options.min_stereo_scale_points) {
+    result.status = "initialised from two frames (the stereo map too thin to track; " +
+                    std::to_string(agreeing) + " stereo points agree on a scale: arbitrary)";
+    return result;
+  }
+  // Scaled about the first keyframe; the stereo rays of the first keyframe join the points,
+  // so that the adjustments keep the scale (one keyframe fixes the gauge, as for a stereo map).
+  const Eigen::Vector3d origin = keyframe0.world_from_rig.translation;
+  for (Point& point : points) point.position = origin + scale * (point.position - origin);
+  Rigid3d& world_from_rig1 = keyframes[1].world_from_rig;
+  world_from_rig1.translation = origin + scale * (world_from_rig1.translation - origin);
+  for (Point& point : points) {
+    for (const TrackObservation& observation : keyframe0.observations) {
+      if (observation.track != point.track) continue;
+      bool present = false;
+      for (const PointObservation& o : point.observations)
+        present |= o.keyframe == 0 && o.camera == observation.camera;
+      if (!present) point.observations.push_back({0, observation.camera, observation.bearing});
+    }
+  }
+  map_from_stereo = true;
+  metric_scale = true;
+  LocalBundleAdjustment();
+  scale_source = "metric (two-frame initialisation scaled by " + std::to_string(agreeing) +
+                 " of the rig's stereo points)";
+  result.world_from_rig = keyframes.back().world_from_rig;
+  result.status = "initialised from two frames (the stereo map too thin to track), scaled by " +
+                  std::to_string(agreeing) + " stereo points";
+  return result;
+}
+
 FrameResult Tracker::Impl::Process(const std::vector<TrackObservation>& observations,
                                    const MapPointSearchFn& search) {
   const int frame = num_frames - 1;
-  const bool initialising = !initialised;
+  // A thin stereo map is still an initialisation: its failed frames wait for the map too.
+  const bool initialising = !initialised || ThinStereoMap();
   const FrameResult result = keyframes.size() == 1 && !initialised ? Initialise(observations)
                                                                    : Track(observations, search);
   if (result.tracked) RecordTracked(frame, result.world_from_rig);
@@ -1079,6 +1184,10 @@ FrameResult Tracker::Impl::Process(const std::vector<TrackObservation>& observat
 }
 
 bool Tracker::Initialised() const { return impl_->initialised; }
+
+std::string Tracker::ScaleSource() const { return impl_->scale_source; }
+
+bool Tracker::MetricScale() const { return impl_->metric_scale; }
 
 std::vector<Tracker::RevisedFrame> Tracker::TakeRevisedFrames() {
   std::vector<RevisedFrame> taken = std::move(impl_->revised);

@@ -60,6 +60,13 @@ struct TrackerOptions {
   bool stereo_initialisation = true;
   int min_stereo_points = 30;
   double stereo_min_ray_angle = 0.5 * M_PI / 180.0;
+  // A stereo map too thin to resect the next frames from (near points only, few tracked on):
+  // while it has one keyframe, a frame that fails the resection tries the two-frame
+  // initialisation with the first keyframe instead, scaled to metres by the stereo points the
+  // two maps share (at least min_stereo_scale_points, else the map keeps the two-frame
+  // solution's scale); the frames that failed meanwhile are resected in the new map.
+  bool stereo_map_fallback = true;
+  int min_stereo_scale_points = 8;
   int min_resection_inliers = 30;  // fewer: the frame is reported as not tracked
   // ... unless at least min_consistent_inliers of them are at least consistent_inlier_share of
   // the matches with a map point (few matches that nearly all agree: a narrow camera in a
@@ -192,6 +199,11 @@ class Tracker {
   bool CanRetryFrame() const;
   // Whether a map exists (two keyframes, or one from the rig's own stereo baseline).
   bool Initialised() const;
+  // Where the map's scale comes from: "metric (...)" when the rig's own baseline or offsets
+  // fixed it, "arbitrary (...)" when only the motion's direction was observed; empty before
+  // the initialisation.
+  std::string ScaleSource() const;
+  bool MetricScale() const;
   // Frames whose result changed after they were added: the frames read while initialising,
   // resected once the map exists, and a first keyframe given up by a restart of the
   // initialisation (no longer tracked). Frame indices count the frames given to AddFrame.

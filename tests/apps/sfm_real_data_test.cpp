@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,9 @@ TEST(SfmRealData, HiltiStereoRigStartsAMetricMapAndPosesEveryFrame) {
   ASSERT_EQ(reference.size(), 3u);
   const std::string frames = testing::ReadTextFile(out / "stats" / "sfm_frames.csv");
   EXPECT_NE(frames.find("initialised from the rig's stereo baseline"), std::string::npos) << frames;
+  const nlohmann::json summary = nlohmann::json::parse(testing::ReadTextFile(out / "sfm.json"));
+  EXPECT_TRUE(summary.at("scale").at("metric").get<bool>()) << summary.at("scale");
+  EXPECT_NE(summary.at("scale").at("source").get<std::string>().find("stereo"), std::string::npos);
   // Relative to the first frame, in metres (the map is metric: no scale is fitted). The rig
   // moves 1 to 2 cm; positions within 2 cm of the reference.
   for (size_t i = 1; i < 3; ++i) {

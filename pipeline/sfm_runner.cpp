@@ -335,7 +335,11 @@ SfmRunResult SfmRunner::Finish() {
   }
   result.scale_source = s.tracker.ScaleSource();
   result.metric_scale = s.tracker.MetricScale();
-  if (!result.scale_source.empty()) spdlog::info("sfm: scale {}", result.scale_source);
+  result.largest_camera_offset = s.rig.MaxCenterOffset();
+  result.median_point_depth = s.tracker.MedianPointDepth();
+  if (!result.scale_source.empty())
+    spdlog::info("sfm: scale {}; largest camera offset {:.3f} m, median point depth {:.2f}",
+                 result.scale_source, result.largest_camera_offset, result.median_point_depth);
   const size_t read = result.frames_total - result.skipped.size();
   const size_t lost_tail = result.frames_total - std::min(result.lost_from, result.frames_total);
   if (!s.tracker.Initialised()) {

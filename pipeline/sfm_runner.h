@@ -126,6 +126,9 @@ struct SfmRunResult {
   // Where the map's scale comes from (Tracker::ScaleSource), and whether it is in metres.
   std::string scale_source;
   bool metric_scale = false;
+  // What the offsets weigh against: the largest camera offset (m) and the points' median depth.
+  double largest_camera_offset = 0.0;
+  double median_point_depth = 0.0;
 
   // Wall seconds of the SfM thread: waiting for decoded images, the front end, the tracker's
   // stages, loop detection and correction, and the whole run.

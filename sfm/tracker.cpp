@@ -202,6 +202,12 @@ struct Tracker::Impl {
   FrameResult Initialise(const std::vector<TrackObservation>& observations);
   // A stereo map of one keyframe that the frames after it could not be resected from
   // (TrackerOptions::stereo_map_fallback).
+  // The keyframes the adjustments hold fixed: the first two (the gauge and the scale of the
+  // initialisation) in central mode; the first only when the map has its scale from the rig
+  // (a stereo map; non-central mode with scale_from_offsets: the offsets fix it).
+  int GaugeKeyframes() const {
+    return map_from_stereo || (!options.central && options.scale_from_offsets) ? 1 : 2;
+  }
   bool ThinStereoMap() const {
     return options.stereo_map_fallback && map_from_stereo && keyframes.size() == 1;
   }
@@ -349,11 +355,14 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
   if (!best || static_cast<int>(best->points.size()) < options.min_init_points) return result;
   const Rigid3d world_from_rig1 = best->world_from_rig1;
   const std::vector<std::pair<int, Eigen::Vector3d>>& new_points = best->points;
-  metric_scale = best->metric;
-  scale_source = best->metric ? "metric (the rig's offsets: generalised relative pose of the "
-                                "first two keyframes)"
-                              : "arbitrary (two-frame initialisation: the direction of the "
-                                "motion only; the length of the first step is 1)";
+  metric_scale = !options.central && (best->metric || options.scale_from_offsets);
+  scale_source =
+      options.central              ? "arbitrary (central mode: the length of the first step is 1)"
+      : options.scale_from_offsets ? "metric (the rig's camera offsets, in the bundle adjustments)"
+      : best->metric ? "metric (the rig's offsets: generalised relative pose of the first two "
+                       "keyframes)"
+                     : "arbitrary (two-frame initialisation: the direction of the motion "
+                       "only; the length of the first step is 1)";
 
   Keyframe keyframe1;
   keyframe1.frame = num_frames - 1;
@@ -837,10 +846,7 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
 
 void Tracker::Impl::LocalBundleAdjustment() {
   const int num_keyframes = static_cast<int>(keyframes.size());
-  // The first two keyframes stay fixed: they fix the gauge (and the scale in central mode); a
-  // map started from the rig's stereo baseline has its scale, and its first keyframe fixes
-  // the gauge.
-  const int gauge_keyframes = map_from_stereo ? 1 : 2;
+  const int gauge_keyframes = GaugeKeyframes();
   const int free_begin = std::max(gauge_keyframes, num_keyframes - options.num_free_keyframes);
   const int fixed_begin = std::max(0, free_begin - options.num_fixed_keyframes);
   BundleAdjustmentProblem problem;
@@ -1118,7 +1124,7 @@ FrameResult Tracker::Impl::InitialiseOverStereoMap(
   }
   if (agreeing < options.min_stereo_scale_points) {
     result.status = "initialised from two frames (the stereo map too thin to track; " +
-                    std::to_string(agreeing) + " stereo points agree on a scale: arbitrary)";
+                    std::to_string(agreeing) + " stereo points agree on a scale)";
     return result;
   }
   // Scaled about the first keyframe; the stereo rays of the first keyframe join the points,
@@ -1186,6 +1192,22 @@ FrameResult Tracker::Impl::Process(const std::vector<TrackObservation>& observat
 bool Tracker::Initialised() const { return impl_->initialised; }
 
 std::string Tracker::ScaleSource() const { return impl_->scale_source; }
+
+double Tracker::MedianPointDepth() const {
+  const Impl& m = *impl_;
+  std::vector<double> depths;
+  for (const Impl::Point& point : m.points) {
+    if (!point.alive || point.observations.empty()) continue;
+    const Impl::PointObservation& first = point.observations.front();
+    depths.push_back(
+        (point.position -
+         m.Ray(m.keyframes[first.keyframe].world_from_rig, first.camera, first.bearing).center)
+            .norm());
+  }
+  if (depths.empty()) return 0.0;
+  std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
+  return depths[depths.size() / 2];
+}
 
 bool Tracker::MetricScale() const { return impl_->metric_scale; }
 
@@ -1292,7 +1314,8 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust() {
   Impl& m = *impl_;
   BundleAdjustmentProblem problem;
   for (size_t k = 0; k < m.keyframes.size(); ++k)
-    problem.keyframes.push_back({m.keyframes[k].world_from_rig, k < 2});
+    problem.keyframes.push_back(
+        {m.keyframes[k].world_from_rig, static_cast<int>(k) < m.GaugeKeyframes()});
   std::vector<int> point_of;
   for (size_t p = 0; p < m.points.size(); ++p) {
     const Impl::Point& point = m.points[p];

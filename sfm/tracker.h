@@ -66,6 +66,12 @@ struct TrackerOptions {
   // two maps share (at least min_stereo_scale_points, else the map keeps the two-frame
   // solution's scale); the frames that failed meanwhile are resected in the new map.
   bool stereo_map_fallback = true;
+  // Non-central mode: the adjustments hold only the first keyframe fixed, so that the rig's
+  // camera offsets give the map its scale in metres (the first step of a two-frame
+  // initialisation is then only a starting value). How well the offsets observe the scale
+  // depends on their size against the depth of the points (Tracker::MedianPointDepth). false:
+  // the first two keyframes are fixed, and the scale is that of the initialisation.
+  bool scale_from_offsets = true;
   int min_stereo_scale_points = 8;
   int min_resection_inliers = 30;  // fewer: the frame is reported as not tracked
   // ... unless at least min_consistent_inliers of them are at least consistent_inlier_share of
@@ -107,7 +113,7 @@ struct TrackerOptions {
   // min_relative_inliers_alone inliers and min_scale_points_alone agreeing map points, and the
   // frame becomes a keyframe, so that its matches with the reference are triangulated.
   bool relative_pose_fallback = true;
-  int min_relative_inliers_alone = 50;
+  int min_relative_inliers_alone = 20;
   int min_scale_points_alone = 8;
   // RetryFrame's resections (observations matched by descriptors: corners detected again in
   // another view, a pixel or so off, not followed windows) count inliers within
@@ -204,6 +210,9 @@ class Tracker {
   // the initialisation.
   std::string ScaleSource() const;
   bool MetricScale() const;
+  // The median distance of the live points from the first keyframe that observed them (map
+  // units; 0 without points).
+  double MedianPointDepth() const;
   // Frames whose result changed after they were added: the frames read while initialising,
   // resected once the map exists, and a first keyframe given up by a restart of the
   // initialisation (no longer tracked). Frame indices count the frames given to AddFrame.

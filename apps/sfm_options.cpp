@@ -10,6 +10,10 @@
 
 namespace omni {
 
+int CornersPerImage(int num_cameras) {
+  return std::clamp(2100 / std::max(1, num_cameras), 350, 700);
+}
+
 void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
   command->add_flag("--central", o->central, "Central approximation (default: rig.json)");
   command->add_flag("--non-central", o->non_central, "True camera offsets (default: rig.json)");
@@ -18,7 +22,10 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "Shrink the images by this factor before detection (paper: 2; default 0: "
                    "from the image size, the longest side to about 640 pixels)")
       ->capture_default_str();
-  command->add_option("--corners", o->sfm.tracks.harris.max_corners, "Harris corners per image")
+  command
+      ->add_option("--corners", o->corners,
+                   "Harris corners per image (default 0: 2100 over the rig's cameras, between 350 "
+                   "and 700)")
       ->capture_default_str();
   command
       ->add_option("--min-tracked-share", o->sfm.tracker.keyframes.min_tracked_share,
@@ -63,6 +70,9 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
     throw InputError("", "--downscale",
                      "expected 0 (from the image size) or a factor of 1 or more");
   o->sfm.tracker.central = o->central ? true : o->non_central ? false : rig.central;
+  if (o->corners < 0) throw InputError("", "--corners", "expected 0 (from the rig) or a count");
+  o->sfm.tracks.harris.max_corners =
+      o->corners > 0 ? o->corners : CornersPerImage(rig.NumCameras());
   if (o->downscale > 0.0) {
     o->sfm.tracks.harris.downscale = o->downscale;
   } else {

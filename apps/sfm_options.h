@@ -16,6 +16,8 @@ struct SfmCommandLine {
   double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
   // --downscale; 0: from the image size (WorkingDownscale of the largest camera image).
   double downscale = 0.0;
+  // --corners; 0: from the rig, CornersPerImage(number of cameras).
+  int corners = 0;
   // Central mode treats the camera centres as one point: a camera offset d seen at depth z
   // bends the rays by about d / z radians. The map's scale is unknown in central mode, so the
   // depth is the user's (metres; street facades are 5-20 m away); above this ratio of the
@@ -26,6 +28,11 @@ struct SfmCommandLine {
   std::string frames;
   SfmRunnerOptions sfm;
 };
+
+// Harris corners per image when --corners is not given: a keyframe's budget of about 2100
+// corners (the paper: about 2000 over six images) spread over the rig's cameras, between 350
+// and 700 per image (a single camera has 700: with 350 a phone photo keeps too few matches).
+int CornersPerImage(int num_cameras);
 
 // Adds the SfM group to `command` (the values land in *options, which must outlive it).
 void AddSfmOptions(CLI::App* command, SfmCommandLine* options);

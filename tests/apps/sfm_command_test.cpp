@@ -194,6 +194,20 @@ TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
   EXPECT_EQ(testing::SplitText(missing.err).size(), 1u) << missing.err;
 }
 
+// Makes a synthetic drive in dir/drive (`omnisculpt synth` with `arguments`); empty, with the
+// failure recorded, when synth fails.
+fs::path SynthDrive(const fs::path& dir, std::vector<std::string> arguments) {
+  const fs::path drive = dir / "drive";
+  arguments.insert(arguments.begin(), {"--quiet", "synth"});
+  arguments.insert(arguments.end(), {"--out", drive.string()});
+  const testing::CommandResult result = testing::RunOmnisculpt(arguments, dir);
+  if (result.exit_code != 0) {
+    ADD_FAILURE() << "synth failed: " << result.err;
+    return {};
+  }
+  return drive;
+}
+
 // One phone-like pinhole camera (the pinhole rig preset, 1024x768, 65 degrees across) on the
 // short drive's path through its first turn (70 frames, 54 m): the few matches that nearly all
 // agree in the turn are enough, so every frame is posed, within 1 % of the distance driven.
@@ -244,11 +258,8 @@ void ExpectEveryFramePosedWithinOnePercent(const std::string& command, const fs:
 // `reconstruct`.
 TEST(SfmCommand, TheDefaultTinyDrivePosesEveryFrame) {
   const testing::TempDir dir("sfm_tiny_test");
-  const fs::path drive = dir.path() / "drive";
-  ASSERT_EQ(testing::RunOmnisculpt(
-                {"--quiet", "synth", "--preset", "tiny", "--out", drive.string()}, dir.path())
-                .exit_code,
-            0);
+  const fs::path drive = SynthDrive(dir.path(), {"--preset", "tiny"});
+  ASSERT_FALSE(drive.empty());
   ExpectEveryFramePosedWithinOnePercent("sfm", drive, dir.path() / "sfm", dir.path());
   ExpectEveryFramePosedWithinOnePercent("reconstruct", drive, dir.path() / "rec", dir.path());
 }
@@ -258,12 +269,8 @@ TEST(SfmCommand, TheDefaultTinyDrivePosesEveryFrame) {
 // 1 % of the distance driven.
 TEST(SfmCommand, AThinnedDrivePosesEveryFrameWithinOnePercent) {
   const testing::TempDir dir("sfm_thinned_test");
-  const fs::path drive = dir.path() / "drive";
-  ASSERT_EQ(testing::RunOmnisculpt({"--quiet", "synth", "--preset", "demo", "--frame-step", "10",
-                                    "--out", drive.string()},
-                                   dir.path())
-                .exit_code,
-            0);
+  const fs::path drive = SynthDrive(dir.path(), {"--preset", "demo", "--frame-step", "10"});
+  ASSERT_FALSE(drive.empty());
   ExpectEveryFramePosedWithinOnePercent("sfm", drive, dir.path() / "sfm", dir.path());
 }
 
@@ -273,12 +280,8 @@ TEST(SfmCommand, AThinnedDrivePosesEveryFrameWithinOnePercent) {
 // every frame posed within 1 % of the distance (measured 0.03 %; 5 of 13 with 50 inliers).
 TEST(SfmCommand, TheShortDriveThinnedToOneFrameInTenPosesEveryFrame) {
   const testing::TempDir dir("sfm_short_thinned_test");
-  const fs::path drive = dir.path() / "drive";
-  ASSERT_EQ(testing::RunOmnisculpt({"--quiet", "synth", "--preset", "short", "--frame-step", "10",
-                                    "--out", drive.string()},
-                                   dir.path())
-                .exit_code,
-            0);
+  const fs::path drive = SynthDrive(dir.path(), {"--preset", "short", "--frame-step", "10"});
+  ASSERT_FALSE(drive.empty());
   ExpectEveryFramePosedWithinOnePercent("sfm", drive, dir.path() / "sfm", dir.path());
 }
 
@@ -289,12 +292,8 @@ TEST(SfmCommand, TheShortDriveThinnedToOneFrameInTenPosesEveryFrame) {
 // keyframes fixed at the initialisation's unit step it was 1.23, the first keyframe 1.8 m off).
 TEST(SfmCommand, TheFisheyeRigOnTheTinyDrivePosesEveryFrame) {
   const testing::TempDir dir("sfm_fisheye_tiny_test");
-  const fs::path drive = dir.path() / "drive";
-  ASSERT_EQ(testing::RunOmnisculpt({"--quiet", "synth", "--preset", "tiny", "--rig-preset",
-                                    "fisheye5", "--out", drive.string()},
-                                   dir.path())
-                .exit_code,
-            0);
+  const fs::path drive = SynthDrive(dir.path(), {"--preset", "tiny", "--rig-preset", "fisheye5"});
+  ASSERT_FALSE(drive.empty());
   double scale = 0.0;
   ExpectEveryFramePosedWithinOnePercent("sfm", drive, dir.path() / "sfm", dir.path(), &scale);
   EXPECT_NEAR(scale, 1.0, 0.15);
@@ -310,12 +309,9 @@ TEST(SfmCommand, TheFisheyeRigOnTheTinyDrivePosesEveryFrame) {
 // the distance, and the map in metres within 2 % (measured 0.2 %).
 TEST(SfmCommand, TheCarRigOnTheTinyDriveIsMetric) {
   const testing::TempDir dir("sfm_car_tiny_test");
-  const fs::path drive = dir.path() / "drive";
-  ASSERT_EQ(testing::RunOmnisculpt({"--quiet", "synth", "--preset", "tiny", "--rig-preset", "car",
-                                    "--image-scale", "0.25", "--out", drive.string()},
-                                   dir.path())
-                .exit_code,
-            0);
+  const fs::path drive =
+      SynthDrive(dir.path(), {"--preset", "tiny", "--rig-preset", "car", "--image-scale", "0.25"});
+  ASSERT_FALSE(drive.empty());
   double scale = 0.0;
   ExpectEveryFramePosedWithinOnePercent("sfm", drive, dir.path() / "sfm", dir.path(), &scale);
   EXPECT_NEAR(scale, 1.0, 0.02);

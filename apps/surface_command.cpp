@@ -261,6 +261,11 @@ void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOpti
 
 void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
   command
+      ->add_option("--min-aperture", sculptor->min_aperture_deg,
+                   "Aperture filter: keep a point only when two of its rays are more than this "
+                   "many degrees apart (its triangulation angle)")
+      ->capture_default_str();
+  command
       ->add_option("--reach-quantile", sculptor->reach_quantile,
                    "s is at least the first keyframes' points' distance to their keyframe at "
                    "this quantile (those with a wide aperture) over the ray-length factor 15, so "

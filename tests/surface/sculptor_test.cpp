@@ -326,6 +326,43 @@ TEST(IncrementalSculptor, PointFiltersOfSection51) {
   EXPECT_EQ(sculptor.CheckInvariants(), "");
 }
 
+// The aperture bound: a point whose two rays are 7.6° apart passes the default (5°) and is
+// dropped by the paper's 10°; one at 2.9° is dropped by both.
+TEST(IncrementalSculptor, ApertureFilterKeepsNarrowerTriangulationsThanThePaper) {
+  auto added_and_filtered = [](double min_aperture_deg) {
+    SculptorOptions options;
+    options.scale = 1.0;
+    options.min_aperture_deg = min_aperture_deg;
+    IncrementalSculptor sculptor(options);
+    SurfaceKeyframe kf;
+    kf.id = KeyframeId(0);
+    kf.centre = Eigen::Vector3d(0, 0, 2);
+    const Eigen::Vector3d left(-0.5, 0, 2), right(0.5, 0, 2);
+    auto point = [&](const Eigen::Vector3d& p, const Eigen::Vector3d& o1,
+                     const Eigen::Vector3d& o2) {
+      SurfacePoint sp;
+      sp.id = PointId(static_cast<uint32_t>(kf.points.size()));
+      sp.position = p;
+      sp.rays = {{KeyframeId(0), o1}, {KeyframeId(0), o2}};
+      kf.points.push_back(sp);
+    };
+    point({0, 5, 1}, {-3, 0, 2}, {3, 0, 2});                     // 62°: kept by both
+    point({0.5, 6, 0}, {-3, 0, 2}, {3, 0, 2});                   // wide: kept by both
+    point({0, 7.5, 2}, left, right);                             // 7.6°
+    point({0, 10, 2}, left, left + Eigen::Vector3d(0.5, 0, 0));  // 2.9°
+    const std::vector<KeyframeStats> stats = sculptor.AddKeyframe(kf);
+    EXPECT_EQ(sculptor.CheckInvariants(), "");
+    return std::make_pair(stats.at(0).points_added, stats.at(0).points_filtered_aperture);
+  };
+  EXPECT_EQ(SculptorOptions().min_aperture_deg, 5.0);
+  const auto by_default = added_and_filtered(SculptorOptions().min_aperture_deg);
+  const auto paper = added_and_filtered(10.0);
+  EXPECT_EQ(by_default.first, 3u);
+  EXPECT_EQ(by_default.second, 1u);
+  EXPECT_EQ(paper.first, 2u);
+  EXPECT_EQ(paper.second, 2u);
+}
+
 // Keyframes 0.5 m apart along x, 4 m above a ground; points on the ground and on two facades
 // 10 m to each side, within 8 m along x, seen from origins 3 m apart.
 std::vector<SurfaceKeyframe> StreetStream(int keyframes, std::vector<double> extra_heights = {}) {

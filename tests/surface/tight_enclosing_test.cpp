@@ -224,7 +224,7 @@ TEST(PointFilters, PerFilterCountsAddUpAndMatchABruteForceRecount) {
             widest = std::max(widest, std::acos(c) * 180.0 / M_PI);
           }
         }
-        if (!(widest > 10.0)) reason = 3;
+        if (!(widest > options.min_aperture_deg)) reason = 3;
       }
       if (reason >= 0) ++totals[reason];
       kf.points.push_back(p);

@@ -20,6 +20,7 @@
 #include "calib/error.h"
 #include "calib/input_file.h"
 #include "calib/number_text.h"
+#include "calib/png_grey.h"
 #include "calib/rig_io.h"
 
 namespace omni {
@@ -168,11 +169,16 @@ cv::Mat ReadImage8Bit(const std::filesystem::path& file, int flags, const Camera
     throw InputError(file, "", "image file too large (over 2 GB)");
   }
   cv::Mat image;
-  try {
-    const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8U, const_cast<char*>(data.data()));
-    image = cv::imdecode(bytes, flags);
-  } catch (const cv::Exception&) {
-    image.release();  // a codec that throws on a corrupt file is treated as one that fails
+  // A drive's plain 8-bit grey PNGs (the common case) decode here about twice as fast, to the
+  // same pixels; every other file goes through OpenCV.
+  if (!(flags == cv::IMREAD_GRAYSCALE && DecodePlainGreyPng(data, &image))) {
+    image.release();
+    try {
+      const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8U, const_cast<char*>(data.data()));
+      image = cv::imdecode(bytes, flags);
+    } catch (const cv::Exception&) {
+      image.release();  // a codec that throws on a corrupt file is treated as one that fails
+    }
   }
   if (image.empty()) throw InputError(file, "", "cannot decode the image (corrupt)");
   if (image.depth() != CV_8U) throw InputError(file, "", "expected 8 bits per channel");

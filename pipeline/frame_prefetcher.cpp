@@ -1,5 +1,7 @@
 #include "pipeline/frame_prefetcher.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cassert>
 #include <chrono>
@@ -14,6 +16,23 @@ std::string FramePrefetcherOptions::Check() const {
   return {};
 }
 
+std::vector<cv::Mat> LoadGrayFrame(const Drive& drive, size_t frame) {
+  const size_t num_cameras = drive.rig().NumCameras();
+  std::vector<cv::Mat> images(num_cameras);
+  std::vector<std::exception_ptr> errors(num_cameras);
+  // One task per camera: a PNG of a car rig's 1920x1200 camera takes 15-20 ms to decode.
+  tbb::parallel_for(size_t{0}, num_cameras, [&](size_t c) {
+    try {
+      images[c] = drive.LoadGray(frame, c);
+    } catch (...) {
+      errors[c] = std::current_exception();
+    }
+  });
+  for (const std::exception_ptr& error : errors)
+    if (error) std::rethrow_exception(error);
+  return images;
+}
+
 FramePrefetcher::FramePrefetcher(size_t num_frames, Loader loader,
                                  const FramePrefetcherOptions& options)
     : num_frames_(num_frames),
@@ -26,14 +45,7 @@ FramePrefetcher::FramePrefetcher(size_t num_frames, Loader loader,
 FramePrefetcher::FramePrefetcher(const Drive& drive, size_t num_frames,
                                  const FramePrefetcherOptions& options)
     : FramePrefetcher(
-          num_frames,
-          [&drive](size_t frame) {
-            std::vector<cv::Mat> images;
-            for (size_t c = 0; c < drive.rig().NumCameras(); ++c)
-              images.push_back(drive.LoadGray(frame, c));
-            return images;
-          },
-          options) {}
+          num_frames, [&drive](size_t frame) { return LoadGrayFrame(drive, frame); }, options) {}
 
 FramePrefetcher::~FramePrefetcher() { Stop(); }
 

@@ -1,6 +1,7 @@
 #pragma once
 // Decodes the images of the next frames of a drive on a thread of its own, so that
-// the SfM thread of `omnisculpt reconstruct` and `omnisculpt sfm` does not wait ~3 ms per PNG:
+// the SfM thread of `omnisculpt reconstruct` and `omnisculpt sfm` does not wait ~3 ms per PNG
+// (a drive's frame: its cameras' images decoded in parallel, LoadGrayFrame):
 // frames are delivered in order, each with its images or the error that reading one of them
 // raised (the caller reports and skips it, or rethrows). At most frames_ahead frames are decoded
 // (or being decoded) and not yet taken, so memory stays bounded however slow the consumer is.
@@ -42,6 +43,12 @@ struct PrefetchedFrame {
   }
 };
 
+// The grey images (Drive::LoadGray) of one frame of `drive`, one per camera, the cameras
+// decoded in parallel (TBB: the prefetch thread and the idle core of a waiting SfM thread);
+// when images cannot be read, the error of the lowest camera among them is thrown, as a
+// serial loop would.
+std::vector<cv::Mat> LoadGrayFrame(const Drive& drive, size_t frame);
+
 class FramePrefetcher {
  public:
   // The images of one frame, one per camera; throws (InputError) when one cannot be read.
@@ -49,7 +56,7 @@ class FramePrefetcher {
 
   // Frames 0 .. num_frames-1 of `loader`; decoding starts at once.
   FramePrefetcher(size_t num_frames, Loader loader, const FramePrefetcherOptions& options = {});
-  // The grey images (Drive::LoadGray) of the first num_frames frames of `drive`, which must
+  // The grey images (LoadGrayFrame) of the first num_frames frames of `drive`, which must
   // outlive the prefetcher.
   FramePrefetcher(const Drive& drive, size_t num_frames,
                   const FramePrefetcherOptions& options = {});

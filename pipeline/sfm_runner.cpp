@@ -90,12 +90,7 @@ SfmFrameSource DriveFrameSource(const Drive& drive) {
   SfmFrameSource source;
   source.folder = drive.folder().string();
   source.num_frames = drive.NumFrames();
-  source.load = [&drive](size_t frame) {
-    std::vector<cv::Mat> images;
-    for (size_t c = 0; c < drive.rig().NumCameras(); ++c)
-      images.push_back(drive.LoadGray(frame, c));
-    return images;
-  };
+  source.load = [&drive](size_t frame) { return LoadGrayFrame(drive, frame); };
   source.name = [&drive](size_t frame) { return drive.FrameName(frame); };
   return source;
 }

@@ -22,7 +22,7 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libceres-dev libcgal-dev libgmp-dev libmpfr-dev libtbb-dev
   libopengv-dev libembree-dev libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev libyaml-cpp-dev
-  zlib1g-dev
+  zlib1g-dev libdeflate-dev
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
   clang libclang-rt-14-dev e2fsprogs
   time  # /usr/bin/time -v: peak RSS in scripts/bench.sh

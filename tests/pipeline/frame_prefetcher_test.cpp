@@ -8,10 +8,16 @@
 
 #include <atomic>
 #include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
 #include <thread>
 
+#include "calib/drive.h"
 #include "calib/error.h"
+#include "calib/rig_io.h"
+#include "tests/calib/io_temp_dir.h"
 #include "tests/calib/options_error_check.h"
 
 namespace omni {
@@ -180,6 +186,75 @@ TEST(PipelineFramePrefetcher, StoppingEarlyJoinsTheThreadAndDecodesNoMore) {
   releaser.join();
   EXPECT_FALSE(slow.Next().has_value());
   slow.Stop();  // twice is harmless
+}
+
+// A drive of `cameras` cameras and 2 frames of 16x12 grey images, each camera's image a
+// different grey level (frame * 100 + camera * 10 + 5); the images named in `corrupt`
+// (camera, frame) are not PNGs.
+std::filesystem::path WriteGreyDrive(const std::filesystem::path& root, int cameras,
+                                     const std::vector<std::pair<int, int>>& corrupt) {
+  Rig rig;
+  rig.name = "ring";
+  for (int c = 0; c < cameras; ++c) {
+    Camera camera;
+    camera.name = "cam" + std::to_string(c);
+    camera.width = 16;
+    camera.height = 12;
+    camera.params = {10.0, 10.0, 7.5, 5.5};
+    camera.cam_from_rig.translation = Eigen::Vector3d(0.1 * c, 0.0, 0.0);
+    rig.cameras.push_back(camera);
+  }
+  WriteRigJson(rig, root / "rig.json");
+  for (int c = 0; c < cameras; ++c) {
+    const std::filesystem::path folder = root / "images" / rig.cameras[c].name;
+    std::filesystem::create_directories(folder);
+    for (int f = 0; f < 2; ++f) {
+      const std::filesystem::path file = folder / ("00000" + std::to_string(f) + ".png");
+      if (std::find(corrupt.begin(), corrupt.end(), std::make_pair(c, f)) != corrupt.end())
+        std::ofstream(file, std::ios::binary) << "not a png";
+      else
+        EXPECT_TRUE(
+            cv::imwrite(file.string(), cv::Mat(12, 16, CV_8UC1, cv::Scalar(f * 100 + c * 10 + 5))));
+    }
+  }
+  return root;
+}
+
+TEST(PipelineLoadGrayFrame, GivesEachCameraItsOwnImageInOrder) {
+  testing::TempDir dir;
+  const Drive drive = Drive::Open(WriteGreyDrive(dir.path(), 6, {}));
+  for (size_t f = 0; f < 2; ++f) {
+    const std::vector<cv::Mat> images = LoadGrayFrame(drive, f);
+    ASSERT_EQ(images.size(), 6u);
+    for (size_t c = 0; c < 6; ++c) {
+      ASSERT_EQ(images[c].type(), CV_8UC1);
+      EXPECT_EQ(cv::norm(images[c], drive.LoadGray(f, c), cv::NORM_INF), 0.0) << f << " " << c;
+      EXPECT_EQ(images[c].at<uint8_t>(3, 4), static_cast<int>(f * 100 + c * 10 + 5));
+    }
+  }
+}
+
+TEST(PipelineLoadGrayFrame, OfSeveralUnreadableImagesTheLowestCameraIsNamed) {
+  testing::TempDir dir;
+  const Drive drive = Drive::Open(WriteGreyDrive(dir.path(), 6, {{4, 1}, {2, 1}, {5, 1}}));
+  EXPECT_EQ(LoadGrayFrame(drive, 0).size(), 6u);
+  for (int attempt = 0; attempt < 20; ++attempt) {  // whichever task fails first
+    try {
+      LoadGrayFrame(drive, 1);
+      ADD_FAILURE() << "no error";
+    } catch (const InputError& error) {
+      const std::string what = error.what();
+      EXPECT_NE(what.find("cam2"), std::string::npos) << what;
+      EXPECT_EQ(what.find("cam4"), std::string::npos) << what;
+    }
+  }
+  // Through the prefetcher: the frame arrives with that error, the next frame's images after.
+  FramePrefetcher prefetcher(drive, 2);
+  std::optional<PrefetchedFrame> first = prefetcher.Next(), second = prefetcher.Next();
+  ASSERT_TRUE(first && second);
+  EXPECT_TRUE(first->loaded());
+  EXPECT_FALSE(second->loaded());
+  EXPECT_THROW(second->Rethrow(), InputError);
 }
 
 TEST(PipelineFramePrefetcher, ZeroFramesGivesNothing) {

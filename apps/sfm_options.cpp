@@ -11,7 +11,7 @@
 namespace omni {
 
 int CornersPerImage(int num_cameras) {
-  return std::clamp(2100 / std::max(1, num_cameras), 350, 700);
+  return std::clamp(2100 / std::max(1, num_cameras), 350, 1000);
 }
 
 void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
@@ -25,7 +25,7 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
   command
       ->add_option("--corners", o->corners,
                    "Harris corners per image (default 0: 2100 over the rig's cameras, between 350 "
-                   "and 700)")
+                   "and 1000)")
       ->capture_default_str();
   command
       ->add_option("--min-tracked-share", o->sfm.tracker.keyframes.min_tracked_share,

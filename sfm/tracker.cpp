@@ -973,10 +973,15 @@ FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations,
   ++s.num_frames;
   const int frame = s.num_frames - 1;
   // A new start when the first keyframe cannot be initialised from (see max_init_frames).
+  // A stereo map of one keyframe is given up only when no frame has been tracked from it for as
+  // long (a rig standing still keeps its map and its poses).
   const bool restart =
-      !s.keyframes.empty() && (!s.initialised || s.ThinStereoMap()) &&
-      (frame - s.keyframes[0].frame > s.options.max_init_frames ||
-       static_cast<int>(s.keyframes[0].observations.size()) < s.options.min_init_points);
+      !s.keyframes.empty() &&
+      ((!s.initialised &&
+        (frame - s.keyframes[0].frame > s.options.max_init_frames ||
+         static_cast<int>(s.keyframes[0].observations.size()) < s.options.min_init_points)) ||
+       (s.ThinStereoMap() && !s.last_tracked.empty() &&
+        frame - s.last_tracked.back().frame > s.options.max_init_frames));
   if (s.keyframes.empty() || restart) return s.StartMap(observations);
   return s.Process(observations, search);
 }

@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -59,6 +60,46 @@ TEST(SfmRealData, HiltiStereoRigStartsAMetricMapAndPosesEveryFrame) {
     EXPECT_LT(estimated.rotation.angularDistance(truth.rotation) * 180.0 / M_PI, 2.0)
         << "frame " << i;
   }
+}
+
+// The Hilti rig standing still: its three frames over and over (15 frames, each camera's images
+// linked), so no frame ever has the baseline of a second keyframe. The stereo map is kept the
+// whole time (one map, no restart), and every frame is posed where its source frame is.
+TEST(SfmRealData, HiltiStandingStillKeepsItsStereoMap) {
+  const fs::path real = RealSet("hilti_alphasense_5fisheye");
+  ASSERT_TRUE(fs::exists(real / "rig.json")) << real << " is missing";
+  const fs::path scratch = testing::ScratchDir("sfm_real", "hilti_still");
+  const fs::path drive = scratch / "drive";
+  fs::remove_all(drive);
+  fs::create_directories(drive / "images");
+  fs::copy_file(real / "rig.json", drive / "rig.json");
+  constexpr int kFrames = 15;
+  for (int camera = 0; camera < 5; ++camera) {
+    const std::string name = "cam" + std::to_string(camera);
+    fs::create_directories(drive / "images" / name);
+    for (int frame = 0; frame < kFrames; ++frame) {
+      char file[16];
+      std::snprintf(file, sizeof(file), "%06d.jpg", frame);
+      char source[16];
+      std::snprintf(source, sizeof(source), "%06d.jpg", frame % 3);
+      fs::create_symlink(real / "images" / name / source, drive / "images" / name / file);
+    }
+  }
+  const fs::path out = scratch / "sfm";
+  const testing::CommandResult run =
+      testing::RunOmnisculpt({"--quiet", "sfm", drive.string(), "--out", out.string()}, scratch);
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const std::string frames = testing::ReadTextFile(out / "stats" / "sfm_frames.csv");
+  EXPECT_EQ(frames.find("restarted"), std::string::npos) << frames;
+  const std::vector<StampedPose> poses = ReadTum(out / "frame_poses.tum");
+  ASSERT_EQ(poses.size(), static_cast<size_t>(kFrames)) << frames;
+  for (int frame = 3; frame < kFrames; ++frame)
+    EXPECT_LT(
+        (poses[frame].world_from_rig.translation - poses[frame % 3].world_from_rig.translation)
+            .norm(),
+        0.01)
+        << "frame " << frame << "\n"
+        << frames;
 }
 
 // The reference (OpenSfM's reconstruction, arbitrary scale) gives the photos' relative

@@ -200,14 +200,14 @@ struct Tracker::Impl {
   }
 
   FrameResult Initialise(const std::vector<TrackObservation>& observations);
-  // A stereo map of one keyframe that the frames after it could not be resected from
-  // (TrackerOptions::stereo_map_fallback).
   // The keyframes the adjustments hold fixed: the first two (the gauge and the scale of the
   // initialisation) in central mode; the first only when the map has its scale from the rig
   // (a stereo map; non-central mode with scale_from_offsets: the offsets fix it).
   int GaugeKeyframes() const {
     return map_from_stereo || (!options.central && options.scale_from_offsets) ? 1 : 2;
   }
+  // A stereo map of one keyframe, which a frame whose resection fails may replace
+  // (TrackerOptions::stereo_map_fallback).
   bool ThinStereoMap() const {
     return options.stereo_map_fallback && map_from_stereo && keyframes.size() == 1;
   }

@@ -151,7 +151,7 @@ struct SculptorOptions {
   // apart. The paper's 10° dropped half of the SfM's points (most tracks span two keyframes,
   // 2.3 m apart) and with them most of the rays that carve; 5° raises the pixel F@0.5 of
   // `reconstruct` on the short drive from 0.70 to 0.80 and lowers the tail, and changes little
-  // with the perfect SfM (figures.md F-NEW-SURF4).
+  // with the perfect SfM (figures.md F29).
   double min_aperture_deg = 5.0;
   // The vertical direction v of §5.1, in the world frame of the keyframes (z for the drives of
   // synth/; pipeline/world_up.h estimates it for a world frame without an up axis).

@@ -15,6 +15,7 @@
 #include "calib/drive.h"
 #include "calib/error.h"
 #include "calib/input_file.h"
+#include "pipeline/frame_prefetcher.h"
 #include "sfm/harris.h"
 #include "sfm/loop_closure.h"
 
@@ -253,10 +254,7 @@ std::vector<MergeOverlap> FindRevisits(const std::vector<MergeSegment>& segments
     detectors.push_back(std::make_unique<LoopDetector>(segments[s].rig, options.loop.detection));
     const Drive& drive = *drives.at(segments[s].drive);
     for (size_t frame : keyframes[s].frames) {
-      std::vector<cv::Mat> images;
-      for (size_t c = 0; c < segments[s].rig.NumCameras(); ++c)
-        images.push_back(drive.LoadGray(frame, c));
-      descriptors[s].push_back(detectors[s]->Describe(images));
+      descriptors[s].push_back(detectors[s]->Describe(LoadGrayFrame(drive, frame)));
       detectors[s]->Add(descriptors[s].back());
     }
   }

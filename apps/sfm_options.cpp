@@ -39,6 +39,11 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "and stamped as in the whole drive (segments of a drive; see `merge`)")
       ->excludes(max_frames);
   command
+      ->add_option("--frame-ray-step", o->sfm.tracker.frame_ray_step,
+                   "The points handed to the surface also carry the rays of every N-th tracked "
+                   "frame between keyframes (0: keyframe rays only)")
+      ->capture_default_str();
+  command
       ->add_option("--prefetch", o->sfm.prefetch.frames_ahead,
                    "Frames whose images are decoded ahead of the SfM")
       ->capture_default_str();
@@ -65,6 +70,8 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
   if (!(o->frame_rate > 0.0) || !std::isfinite(o->frame_rate))
     throw InputError("", "--frame-rate", "expected a positive rate");
   if (o->sfm.max_frames < 0) throw InputError("", "--max-frames", "expected 0 or a positive count");
+  if (o->sfm.tracker.frame_ray_step < 0)
+    throw InputError("", "--frame-ray-step", "expected 0 (off) or a step of 1 or more");
   if (!(o->scene_depth > 0.0)) throw InputError("", "--scene-depth", "expected a positive depth");
   if (!(o->downscale >= 0.0) || !std::isfinite(o->downscale))
     throw InputError("", "--downscale",

@@ -11,8 +11,10 @@ SurfaceKeyframe ToSurfaceKeyframe(const FinalizedKeyframe& keyframe) {
     SurfacePoint surface_point;
     surface_point.id = PointId(static_cast<uint32_t>(point.point));
     surface_point.position = point.position;
-    surface_point.rays.reserve(point.rays.size());
+    surface_point.rays.reserve(point.rays.size() + point.frame_rays.size());
     for (const FinalizedRay& ray : point.rays)
+      surface_point.rays.push_back({KeyframeId(static_cast<uint32_t>(ray.keyframe)), ray.center});
+    for (const FinalizedFrameRay& ray : point.frame_rays)
       surface_point.rays.push_back({KeyframeId(static_cast<uint32_t>(ray.keyframe)), ray.center});
     result.points.push_back(std::move(surface_point));
   }

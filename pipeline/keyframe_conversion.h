@@ -11,7 +11,9 @@
 namespace omni {
 
 // Keyframe id, centre c_t, and for each point created with the keyframe its position and its
-// rays (observing keyframe, optical centre). Ids are the tracker's keyframe and point indices.
+// rays (observing keyframe, optical centre), then the rays of the tracked frames between
+// keyframes (FinalizedPoint::frame_rays, each under the id of the keyframe before its frame). Ids
+// are the tracker's keyframe and point indices.
 SurfaceKeyframe ToSurfaceKeyframe(const FinalizedKeyframe& keyframe);
 std::vector<SurfaceKeyframe> ToSurfaceKeyframes(const std::vector<FinalizedKeyframe>& keyframes);
 

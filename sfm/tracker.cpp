@@ -6,6 +6,7 @@
 #include <cassert>
 #include <chrono>
 #include <cmath>
+#include <deque>
 #include <stdexcept>
 #include <unordered_map>
 #include <unordered_set>
@@ -63,6 +64,7 @@ std::string TrackerOptions::Check() const {
     return "scale_max_angle_error: expected a positive angle (radians)";
   if (!(predicted_search_radius_scale >= 1.0))
     return "predicted_search_radius_scale: expected at least 1";
+  if (frame_ray_step < 0) return "frame_ray_step: expected 0 (off) or a step of 1 or more";
   return {};
 }
 
@@ -72,9 +74,16 @@ struct Tracker::Impl {
     int camera;
     Eigen::Vector3d bearing;
   };
+  // An observation by a tracked frame that is not a keyframe (TrackerOptions::frame_ray_step):
+  // its frame stamp and camera.
+  struct FrameObservation {
+    int stamp;
+    int camera;
+  };
   struct Point {
     Eigen::Vector3d position;
     std::vector<PointObservation> observations;
+    std::vector<FrameObservation> frame_observations;
     int created_by = -1;
     int handed_over_by = -1;  // the keyframe whose finalisation handed it to the surface
     int track = -1;
@@ -100,6 +109,25 @@ struct Tracker::Impl {
   std::vector<int> point_stamp;
   int searches = 0;
   std::vector<FinalizedKeyframe> finalized;
+  // The tracked frames whose rays the points carry: the keyframe before each and the frame's
+  // pose relative to it (so that it moves with that keyframe), its step scaled with the distance
+  // from that keyframe to the one before (the map's scale may change after the frame: the
+  // adjustments of a non-central map take it from the initialisation's to the offsets').
+  struct FrameStamp {
+    int frame;
+    int keyframe;
+    Rigid3d keyframe_from_rig;
+    double keyframe_step = 0.0;  // that distance when the frame was tracked; 0: not scaled
+  };
+  std::vector<FrameStamp> frame_stamps;
+  // The recorded frames of the triangulation window with their observations of tracks that had
+  // no point yet: a point triangulated later gets their rays.
+  struct RecentFrame {
+    int stamp;
+    std::vector<TrackObservation> observations;
+  };
+  std::deque<RecentFrame> recent_frames;
+  int tracked_since_keyframe = 0;
   // Motion model: the last two tracked frames (frame index, world_from_rig), and the distance
   // travelled over the tracked steps so far.
   struct TrackedPose {
@@ -224,7 +252,33 @@ struct Tracker::Impl {
     point_stamp.clear();
     track_to_point.clear();
     pending.clear();
+    frame_stamps.clear();
+    recent_frames.clear();
   }
+  // The first keyframe of the triangulation window of keyframe k.
+  int TriangulationWindowBegin(int k) const {
+    return std::max(0, k - options.num_free_keyframes - options.num_fixed_keyframes);
+  }
+  double KeyframeStep(int k) const {
+    return k > 0 ? (keyframes[k].world_from_rig.translation -
+                    keyframes[k - 1].world_from_rig.translation)
+                       .norm()
+                 : 0.0;
+  }
+  Rigid3d FrameStampPose(const FrameStamp& stamp) const {
+    Rigid3d keyframe_from_rig = stamp.keyframe_from_rig;
+    if (stamp.keyframe_step > 0.0)
+      keyframe_from_rig.translation *= KeyframeStep(stamp.keyframe) / stamp.keyframe_step;
+    return keyframes[stamp.keyframe].world_from_rig * keyframe_from_rig;
+  }
+  // A tracked frame that is not a keyframe: its observations of map points (by index into
+  // `observations`) become frame rays of those points; those of tracks without a point are kept
+  // for the triangulation of later keyframes.
+  void RecordFrameRays(const Rigid3d& world_from_rig,
+                       const std::vector<TrackObservation>& observations,
+                       const std::vector<int>& of_map_points);
+  // The frame rays of the points just created from `new_tracks` (track → point).
+  void AddRecentFrameRays(const std::unordered_map<int, int>& new_tracks);
   // Initialise or Track, and what follows from it (the motion model, the frames read while
   // initialising).
   FrameResult Process(const std::vector<TrackObservation>& observations,
@@ -664,7 +718,16 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
     decision.reason = "keyframe of a thin map";
   }
   result.status += decision.reason;
-  if (decision.decision != KeyframeDecision::kKeyframe) return result;
+  if (decision.decision != KeyframeDecision::kKeyframe) {
+    if (options.frame_ray_step > 0 && ++tracked_since_keyframe % options.frame_ray_step == 0) {
+      std::vector<int> of_map_points = reobserved;
+      for (size_t k = 0; k < bearings.size(); ++k)
+        if (ransac.inlier_mask[k]) of_map_points.push_back(observation_index[k]);
+      RecordFrameRays(world_from_rig, observations, of_map_points);
+    }
+    return result;
+  }
+  tracked_since_keyframe = 0;
 
   Keyframe keyframe;
   keyframe.frame = num_frames - 1;
@@ -812,8 +875,7 @@ bool Tracker::Impl::PoseFromRelativeMotion(const std::vector<TrackObservation>& 
 
 void Tracker::Impl::TriangulateNewPoints(int keyframe) {
   const auto start = std::chrono::steady_clock::now();
-  const int window_begin =
-      std::max(0, keyframe - options.num_free_keyframes - options.num_fixed_keyframes);
+  const int window_begin = TriangulationWindowBegin(keyframe);
   // The observations of the tracks without a point, in the window's keyframes (a track may
   // be seen by two cameras of one keyframe).
   std::unordered_map<int, std::vector<PointObservation>> by_track;
@@ -825,6 +887,7 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
       const auto it = by_track.find(older.track);
       if (it != by_track.end()) it->second.push_back({k, older.camera, older.bearing});
     }
+  std::unordered_map<int, int> new_tracks;
   for (const TrackObservation& observation : keyframes[keyframe].observations) {
     const auto it = by_track.find(observation.track);
     if (it == by_track.end() || track_to_point.count(observation.track)) continue;
@@ -839,8 +902,15 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
       rays.push_back(Ray(keyframes[o.keyframe].world_from_rig, o.camera, o.bearing));
     Eigen::Vector3d position;
     if (TriangulatePoint(rays, options.triangulation, &position) == TriangulationStatus::kOk)
-      AddPoint(observation.track, position, keyframe, std::move(track_observations));
+      new_tracks[observation.track] =
+          AddPoint(observation.track, position, keyframe, std::move(track_observations));
   }
+  AddRecentFrameRays(new_tracks);
+  // The recorded frames before the next keyframe's window are of no further use.
+  const int next_window_begin = TriangulationWindowBegin(keyframe + 1);
+  while (!recent_frames.empty() &&
+         frame_stamps[recent_frames.front().stamp].keyframe < next_window_begin)
+    recent_frames.pop_front();
   AddSeconds(start, &timings.triangulate);
 }
 
@@ -924,6 +994,12 @@ FinalizedKeyframe Tracker::Impl::MakeFinalized(int k, const std::vector<int>& ha
         finalized_point.rays.push_back(
             {o.keyframe, keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera), o.camera,
              o.bearing});
+    for (const FrameObservation& o : points[p].frame_observations) {
+      const FrameStamp& stamp = frame_stamps[o.stamp];
+      if (stamp.keyframe <= k || all_rays)
+        finalized_point.frame_rays.push_back(
+            {stamp.keyframe, stamp.frame, o.camera, FrameStampPose(stamp) * CenterInRig(o.camera)});
+    }
     event.points.push_back(std::move(finalized_point));
   }
   return event;
@@ -953,6 +1029,50 @@ void Tracker::Impl::FinalizeUpTo(int end) {
     }
     pending = std::move(still_pending);
     finalized.push_back(MakeFinalized(k, handed));
+  }
+}
+
+void Tracker::Impl::RecordFrameRays(const Rigid3d& world_from_rig,
+                                    const std::vector<TrackObservation>& observations,
+                                    const std::vector<int>& of_map_points) {
+  const int stamp = static_cast<int>(frame_stamps.size());
+  const int keyframe = static_cast<int>(keyframes.size()) - 1;
+  frame_stamps.push_back({num_frames - 1, keyframe,
+                          keyframes[keyframe].world_from_rig.Inverse() * world_from_rig,
+                          KeyframeStep(keyframe)});
+  for (int j : of_map_points) {
+    Point& point = points[track_to_point.at(observations[j].track)];
+    // Two cameras of one frame: one ray in central mode (one optical centre).
+    if (options.central && !point.frame_observations.empty() &&
+        point.frame_observations.back().stamp == stamp)
+      continue;
+    point.frame_observations.push_back({stamp, observations[j].camera});
+  }
+  RecentFrame recent;
+  recent.stamp = stamp;
+  for (const TrackObservation& observation : observations)
+    if (!track_to_point.count(observation.track)) recent.observations.push_back(observation);
+  recent_frames.push_back(std::move(recent));
+}
+
+void Tracker::Impl::AddRecentFrameRays(const std::unordered_map<int, int>& new_tracks) {
+  if (new_tracks.empty()) return;
+  for (const RecentFrame& recent : recent_frames) {
+    const Rigid3d world_from_rig = FrameStampPose(frame_stamps[recent.stamp]);
+    for (const TrackObservation& observation : recent.observations) {
+      const auto it = new_tracks.find(observation.track);
+      if (it == new_tracks.end()) continue;
+      Point& point = points[it->second];
+      const WorldRay ray = Ray(world_from_rig, observation.camera, observation.bearing);
+      const Eigen::Vector3d to_point = point.position - ray.center;
+      if (std::atan2(ray.direction.cross(to_point).norm(), ray.direction.dot(to_point)) >
+          options.reobservation_max_angle_error)
+        continue;
+      if (options.central && !point.frame_observations.empty() &&
+          point.frame_observations.back().stamp == recent.stamp)
+        continue;
+      point.frame_observations.push_back({recent.stamp, observation.camera});
+    }
   }
 }
 
@@ -1087,6 +1207,8 @@ FrameResult Tracker::Impl::InitialiseOverStereoMap(
   std::unordered_map<int, int> stereo_track_to_point = track_to_point;
   std::vector<int> stereo_pending = pending;
   std::vector<int> stereo_stamp = point_stamp;
+  std::vector<FrameStamp> stereo_frame_stamps = frame_stamps;
+  std::deque<RecentFrame> stereo_recent_frames = recent_frames;
   const std::string stereo_scale_source = scale_source;
   ClearPoints();
   map_from_stereo = false;
@@ -1096,6 +1218,8 @@ FrameResult Tracker::Impl::InitialiseOverStereoMap(
     track_to_point = std::move(stereo_track_to_point);
     pending = std::move(stereo_pending);
     point_stamp = std::move(stereo_stamp);
+    frame_stamps = std::move(stereo_frame_stamps);
+    recent_frames = std::move(stereo_recent_frames);
     map_from_stereo = true;
     metric_scale = true;
     scale_source = stereo_scale_source;
@@ -1310,6 +1434,8 @@ void Tracker::MergeTracks(const std::vector<std::pair<int, int>>& drop_keep) {
                                     });
       if (!seen) to.observations.push_back(o);
     }
+    to.frame_observations.insert(to.frame_observations.end(), from.frame_observations.begin(),
+                                 from.frame_observations.end());
     from.alive = false;
     d->second = k->second;
   }
@@ -1367,7 +1493,7 @@ std::vector<FinalizedKeyframe> Tracker::FinalizedSnapshot(bool all_rays) const {
 TrackStats ComputeTrackStats(const std::vector<FinalizedKeyframe>& keyframes, double min_aperture) {
   TrackStats stats;
   std::vector<int> lengths;
-  size_t rays = 0;
+  size_t rays = 0, frame_rays = 0;
   int multi_camera = 0, aperture_ok = 0;
   const double max_cos = std::cos(min_aperture);
   for (const FinalizedKeyframe& keyframe : keyframes)
@@ -1384,6 +1510,7 @@ TrackStats ComputeTrackStats(const std::vector<FinalizedKeyframe>& keyframes, do
       lengths.push_back(static_cast<int>(std::unique(seen_keyframes.begin(), seen_keyframes.end()) -
                                          seen_keyframes.begin()));
       rays += point.rays.size();
+      frame_rays += point.frame_rays.size();
       multi_camera += two_cameras ? 1 : 0;
       bool wide = false;
       for (size_t i = 0; i < directions.size() && !wide; ++i)
@@ -1402,6 +1529,7 @@ TrackStats ComputeTrackStats(const std::vector<FinalizedKeyframe>& keyframes, do
   stats.median_keyframes =
       lengths.size() % 2 ? lengths[half] : 0.5 * (lengths[half - 1] + lengths[half]);
   stats.mean_rays = static_cast<double>(rays) / n;
+  stats.mean_frame_rays = static_cast<double>(frame_rays) / n;
   stats.multi_camera_share = multi_camera / n;
   stats.aperture_ok_share = aperture_ok / n;
   return stats;

@@ -131,6 +131,15 @@ struct TrackerOptions {
   // resected pose (radians; the search radius bounds it already; the central approximation
   // bends near points by up to offset / depth).
   double reobservation_max_angle_error = 0.006;
+  // Rays of the tracked frames between keyframes (docs/design.md §7): a point handed to the
+  // surface also carries the optical centres of the frames that observed it without being
+  // keyframes: the resection's inliers and the agreeing re-observations of its point, and, for a
+  // point triangulated at a later keyframe, the frames since the oldest keyframe of the
+  // triangulation window whose observation of its track lies within
+  // reobservation_max_angle_error of it. Every frame_ray_step-th tracked frame after a keyframe
+  // (1: all); 0: keyframe rays only (the paper). A frame's pose is kept relative to the keyframe
+  // before it, so that it follows that keyframe's corrections.
+  int frame_ray_step = 1;
 
   std::string Check() const;
 };
@@ -156,10 +165,19 @@ struct FinalizedRay {
   int camera = -1;                                     // the observing camera of the keyframe
   Eigen::Vector3d bearing = Eigen::Vector3d::UnitZ();  // the observation, that camera's frame
 };
+// The optical centre of a tracked frame between keyframes that observed the point
+// (TrackerOptions::frame_ray_step); `keyframe` is the keyframe before that frame.
+struct FinalizedFrameRay {
+  int keyframe = -1;
+  int frame = -1;
+  int camera = -1;
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();  // optical centre, world
+};
 struct FinalizedPoint {
   int point = -1;
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
-  std::vector<FinalizedRay> rays;
+  std::vector<FinalizedRay> rays;             // keyframes (sparse/, colours, the surface)
+  std::vector<FinalizedFrameRay> frame_rays;  // tracked frames between them (the surface)
 };
 // A keyframe that left the adjustment window: its pose and points no longer move (docs/design.md
 // §7: the keyframe handed to the surface).
@@ -177,6 +195,7 @@ struct TrackStats {
   double mean_keyframes = 0.0;  // distinct keyframes observing a point
   double median_keyframes = 0.0;
   double mean_rays = 0.0;
+  double mean_frame_rays = 0.0;     // rays of tracked frames between keyframes (the surface's)
   double multi_camera_share = 0.0;  // points observed by two or more cameras of the rig
   // Points with two rays (from their optical centres) more than min_aperture apart: those
   // that pass the aperture filter of the surface (paper §5.1: 10°).

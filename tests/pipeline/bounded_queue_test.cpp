@@ -61,6 +61,7 @@ TEST(KeyframeConversion, CarriesIdsCentrePositionsAndRays) {
   point.point = 42;
   point.position = Eigen::Vector3d(4, 5, 6);
   point.rays = {{7, Eigen::Vector3d(1, 2, 3)}, {5, Eigen::Vector3d(0, 2, 3)}};
+  point.frame_rays = {{6, 19, 2, Eigen::Vector3d(0.5, 2, 3)}};
   keyframe.points = {point, point};
   keyframe.points[1].point = 43;
   const SurfaceKeyframe converted = ToSurfaceKeyframe(keyframe);
@@ -70,9 +71,12 @@ TEST(KeyframeConversion, CarriesIdsCentrePositionsAndRays) {
   EXPECT_EQ(converted.points[0].id, PointId(42));
   EXPECT_EQ(converted.points[1].id, PointId(43));
   EXPECT_EQ(converted.points[0].position, point.position);
-  ASSERT_EQ(converted.points[0].rays.size(), 2u);
+  // The keyframes' rays, then the tracked frames' under the keyframe before them.
+  ASSERT_EQ(converted.points[0].rays.size(), 3u);
   EXPECT_EQ(converted.points[0].rays[1].keyframe, KeyframeId(5));
   EXPECT_EQ(converted.points[0].rays[1].origin, Eigen::Vector3d(0, 2, 3));
+  EXPECT_EQ(converted.points[0].rays[2].keyframe, KeyframeId(6));
+  EXPECT_EQ(converted.points[0].rays[2].origin, Eigen::Vector3d(0.5, 2, 3));
   EXPECT_EQ(ToSurfaceKeyframes({keyframe, keyframe}).size(), 2u);
 }
 

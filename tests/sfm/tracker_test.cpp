@@ -125,6 +125,115 @@ TEST_P(TrackerTest, TracksSyntheticDriveWithSmallTrajectoryError) {
 INSTANTIATE_TEST_SUITE_P(Modes, TrackerTest,
                          ::testing::Values(Case{true, 0.0}, Case{true, 0.05}, Case{false, 0.3}));
 
+// Every point handed over, on the drive above, run with the given frame-ray step.
+struct HandedOver {
+  std::vector<FinalizedKeyframe> keyframes;
+  std::vector<Rigid3d> keyframe_poses;
+  std::vector<int> keyframe_frames;
+};
+HandedOver RunForFrameRays(const SyntheticDrive& drive, bool central, int frame_ray_step) {
+  TrackerOptions options;
+  options.central = central;
+  options.frame_ray_step = frame_ray_step;
+  Tracker tracker(drive.rig, options);
+  HandedOver run;
+  for (const std::vector<TrackObservation>& frame : drive.frames) {
+    tracker.AddFrame(frame);
+    for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())
+      run.keyframes.push_back(std::move(keyframe));
+  }
+  tracker.Finish();
+  for (FinalizedKeyframe& keyframe : tracker.TakeFinalized())
+    run.keyframes.push_back(std::move(keyframe));
+  run.keyframe_poses = tracker.KeyframePoses();
+  run.keyframe_frames = tracker.KeyframeFrames();
+  return run;
+}
+
+class TrackerFrameRaysTest : public ::testing::TestWithParam<Case> {};
+
+// The rays of the tracked frames between keyframes: each from a frame after its keyframe and
+// before the next one, no later than the keyframe that hands the point over, from that frame's
+// true optical centre (after the similarity registration of the keyframes), in a camera that
+// sees the point; every second frame gives about half of them; recording them changes nothing
+// else (the same keyframe poses and keyframe rays).
+TEST_P(TrackerFrameRaysTest, PointsCarryTheRaysOfTheFramesBetweenKeyframes) {
+  const Case mode = GetParam();
+  const SyntheticDrive drive = MakeDrive(mode.rig_radius, 60, 0.0003, 0.03);
+  const HandedOver every = RunForFrameRays(drive, mode.central, 1);
+  const HandedOver second = RunForFrameRays(drive, mode.central, 2);
+  const HandedOver none = RunForFrameRays(drive, mode.central, 0);
+
+  ASSERT_EQ(every.keyframe_poses.size(), none.keyframe_poses.size());
+  for (size_t k = 0; k < every.keyframe_poses.size(); ++k)
+    EXPECT_LT((every.keyframe_poses[k].translation - none.keyframe_poses[k].translation).norm(),
+              1e-9);
+  ASSERT_EQ(every.keyframes.size(), none.keyframes.size());
+  size_t frame_rays_every = 0, frame_rays_second = 0, frame_rays_none = 0, points = 0;
+  for (size_t k = 0; k < none.keyframes.size(); ++k) {
+    ASSERT_EQ(every.keyframes[k].points.size(), none.keyframes[k].points.size());
+    for (size_t p = 0; p < none.keyframes[k].points.size(); ++p)
+      EXPECT_EQ(every.keyframes[k].points[p].rays.size(), none.keyframes[k].points[p].rays.size());
+    for (const FinalizedPoint& point : none.keyframes[k].points)
+      frame_rays_none += point.frame_rays.size();
+  }
+  for (const FinalizedKeyframe& keyframe : second.keyframes)
+    for (const FinalizedPoint& point : keyframe.points)
+      frame_rays_second += point.frame_rays.size();
+
+  std::vector<Eigen::Vector3d> estimated, truth;
+  for (size_t k = 0; k < every.keyframe_poses.size(); ++k) {
+    estimated.push_back(every.keyframe_poses[k].translation);
+    truth.push_back(drive.world_from_rig[every.keyframe_frames[k]].translation);
+  }
+  const Sim3d truth_from_estimated = EstimateSim3Umeyama(estimated, truth, true);
+  const std::set<int> keyframe_frames(every.keyframe_frames.begin(), every.keyframe_frames.end());
+  Eigen::Vector3d rig_center = Eigen::Vector3d::Zero();
+  for (const Camera& camera : drive.rig.cameras) rig_center += camera.cam_from_rig.Center();
+  rig_center /= static_cast<double>(drive.rig.NumCameras());
+  double max_center_error = 0.0;
+  int outside_view = 0;
+  for (const FinalizedKeyframe& keyframe : every.keyframes)
+    for (const FinalizedPoint& point : keyframe.points) {
+      ++points;
+      for (const FinalizedFrameRay& ray : point.frame_rays) {
+        ++frame_rays_every;
+        ASSERT_GE(ray.keyframe, 0);
+        ASSERT_LT(ray.keyframe, static_cast<int>(every.keyframe_frames.size()));
+        EXPECT_LE(ray.keyframe, keyframe.keyframe);
+        EXPECT_EQ(keyframe_frames.count(ray.frame), 0u) << "frame " << ray.frame;
+        EXPECT_GT(ray.frame, every.keyframe_frames[ray.keyframe]);
+        if (ray.keyframe + 1 < static_cast<int>(every.keyframe_frames.size()))
+          EXPECT_LT(ray.frame, every.keyframe_frames[ray.keyframe + 1]);
+        const Rigid3d& world_from_rig = drive.world_from_rig[ray.frame];
+        const Eigen::Vector3d true_center =
+            world_from_rig *
+            (mode.central ? rig_center : drive.rig.cameras[ray.camera].cam_from_rig.Center());
+        max_center_error =
+            std::max(max_center_error, (truth_from_estimated * ray.center - true_center).norm());
+        // The point is in that camera's view (the synthetic cameras' half field is 0.7 rad).
+        const Rigid3d cam_from_world =
+            drive.rig.cameras[ray.camera].cam_from_rig * world_from_rig.Inverse();
+        const Eigen::Vector3d in_camera = cam_from_world * (truth_from_estimated * point.position);
+        outside_view += std::acos(in_camera.normalized().z()) > 0.8;
+      }
+    }
+  EXPECT_EQ(frame_rays_none, 0u);
+  // Keyframes are a few frames apart here: most points are seen by some frames between them.
+  EXPECT_GT(static_cast<double>(frame_rays_every), 1.0 * static_cast<double>(points));
+  EXPECT_GT(frame_rays_second, frame_rays_every / 4);
+  EXPECT_LT(frame_rays_second, 3 * frame_rays_every / 4);
+  EXPECT_LT(max_center_error, 0.005 * drive.length);
+  EXPECT_EQ(outside_view, 0);
+  RecordProperty("max_frame_ray_center_error_um", static_cast<int>(1e6 * max_center_error));
+  RecordProperty("frame_rays_per_point",
+                 static_cast<int>(100.0 * static_cast<double>(frame_rays_every) /
+                                  static_cast<double>(std::max<size_t>(points, 1))));
+}
+
+INSTANTIATE_TEST_SUITE_P(Modes, TrackerFrameRaysTest,
+                         ::testing::Values(Case{true, 0.05}, Case{false, 0.3}));
+
 // Failures in the middle of a drive: black frames (no observations), a frame whose matches are
 // wrong (track ids shuffled), and a frame from 20 frames later (a jump the motion model cannot
 // explain). Each is reported and skipped; no wrong pose enters the map; the frames after them
@@ -483,6 +592,10 @@ TEST(Tracker, BadOptionsThrowNamingTheField) {
   options.num_free_keyframes = 0;
   EXPECT_TRUE(testing::ThrowsOptionsError([&] { Tracker tracker(rig, options); },
                                           "TrackerOptions.num_free_keyframes"));
+  options = TrackerOptions();
+  options.frame_ray_step = -1;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { Tracker tracker(rig, options); },
+                                          "TrackerOptions.frame_ray_step"));
   EXPECT_THROW((Tracker{Rig(), TrackerOptions()}), std::invalid_argument);  // no camera
 }
 

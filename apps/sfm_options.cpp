@@ -44,6 +44,11 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "frame between keyframes (0: keyframe rays only)")
       ->capture_default_str();
   command
+      ->add_option("--frame-ray-min-angle", o->frame_ray_min_angle_deg,
+                   "--frame-ray-step: a frame ray only when at least this many degrees from the "
+                   "point's rays before it (0: all)")
+      ->capture_default_str();
+  command
       ->add_option("--prefetch", o->sfm.prefetch.frames_ahead,
                    "Frames whose images are decoded ahead of the SfM")
       ->capture_default_str();
@@ -72,6 +77,9 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
   if (o->sfm.max_frames < 0) throw InputError("", "--max-frames", "expected 0 or a positive count");
   if (o->sfm.tracker.frame_ray_step < 0)
     throw InputError("", "--frame-ray-step", "expected 0 (off) or a step of 1 or more");
+  if (!(o->frame_ray_min_angle_deg >= 0.0 && o->frame_ray_min_angle_deg < 180.0))
+    throw InputError("", "--frame-ray-min-angle", "expected an angle in [0, 180) degrees");
+  o->sfm.tracker.frame_ray_min_angle = o->frame_ray_min_angle_deg * M_PI / 180.0;
   if (!(o->scene_depth > 0.0)) throw InputError("", "--scene-depth", "expected a positive depth");
   if (!(o->downscale >= 0.0) || !std::isfinite(o->downscale))
     throw InputError("", "--downscale",

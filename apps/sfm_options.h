@@ -24,6 +24,8 @@ struct SfmCommandLine {
   // largest offset to it, the log says the non-central mode is the right one.
   double scene_depth = 10.0;
   double max_central_offset_ratio = 0.01;
+  // --frame-ray-min-angle (degrees): TrackerOptions::frame_ray_min_angle.
+  double frame_ray_min_angle_deg = 1.0;
   // --frames A:B: the drive's frames A to B-1 ("A:" to the end); empty: every frame.
   std::string frames;
   SfmRunnerOptions sfm;

@@ -65,6 +65,8 @@ std::string TrackerOptions::Check() const {
   if (!(predicted_search_radius_scale >= 1.0))
     return "predicted_search_radius_scale: expected at least 1";
   if (frame_ray_step < 0) return "frame_ray_step: expected 0 (off) or a step of 1 or more";
+  if (!(frame_ray_min_angle >= 0.0 && frame_ray_min_angle < M_PI))
+    return "frame_ray_min_angle: expected an angle in [0, pi) (radians)";
   return {};
 }
 
@@ -994,11 +996,25 @@ FinalizedKeyframe Tracker::Impl::MakeFinalized(int k, const std::vector<int>& ha
         finalized_point.rays.push_back(
             {o.keyframe, keyframes[o.keyframe].world_from_rig * CenterInRig(o.camera), o.camera,
              o.bearing});
+    // A frame ray within frame_ray_min_angle of a ray kept before it (the keyframes' first)
+    // carves nearly the same cells: left out.
+    std::vector<Eigen::Vector3d> directions;
+    const double max_cos = std::cos(options.frame_ray_min_angle);
+    if (options.frame_ray_min_angle > 0.0)
+      for (const FinalizedRay& ray : finalized_point.rays)
+        directions.push_back((ray.center - finalized_point.position).normalized());
     for (const FrameObservation& o : points[p].frame_observations) {
       const FrameStamp& stamp = frame_stamps[o.stamp];
-      if (stamp.keyframe <= k || all_rays)
-        finalized_point.frame_rays.push_back(
-            {stamp.keyframe, stamp.frame, o.camera, FrameStampPose(stamp) * CenterInRig(o.camera)});
+      if (stamp.keyframe > k && !all_rays) continue;
+      const Eigen::Vector3d center = FrameStampPose(stamp) * CenterInRig(o.camera);
+      if (options.frame_ray_min_angle > 0.0) {
+        const Eigen::Vector3d direction = (center - finalized_point.position).normalized();
+        if (std::any_of(directions.begin(), directions.end(),
+                        [&](const Eigen::Vector3d& d) { return d.dot(direction) > max_cos; }))
+          continue;
+        directions.push_back(direction);
+      }
+      finalized_point.frame_rays.push_back({stamp.keyframe, stamp.frame, o.camera, center});
     }
     event.points.push_back(std::move(finalized_point));
   }

@@ -140,6 +140,11 @@ struct TrackerOptions {
   // (1: all); 0: keyframe rays only (the paper). A frame's pose is kept relative to the keyframe
   // before it, so that it follows that keyframe's corrections.
   int frame_ray_step = 1;
+  // A frame ray is handed over only when its direction from the point is at least this far
+  // from every ray handed over before it (the point's keyframe rays, then its frame rays in
+  // order; radians, 0: all of them). Closer rays carve nearly the same cells (docs/figures.md
+  // F34: 1 degree keeps the surface's figures with a fifth fewer rays).
+  double frame_ray_min_angle = 1.0 * M_PI / 180.0;
 
   std::string Check() const;
 };

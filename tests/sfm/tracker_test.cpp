@@ -131,10 +131,12 @@ struct HandedOver {
   std::vector<Rigid3d> keyframe_poses;
   std::vector<int> keyframe_frames;
 };
-HandedOver RunForFrameRays(const SyntheticDrive& drive, bool central, int frame_ray_step) {
+HandedOver RunForFrameRays(const SyntheticDrive& drive, bool central, int frame_ray_step,
+                           double frame_ray_min_angle = 0.0) {
   TrackerOptions options;
   options.central = central;
   options.frame_ray_step = frame_ray_step;
+  options.frame_ray_min_angle = frame_ray_min_angle;
   Tracker tracker(drive.rig, options);
   HandedOver run;
   for (const std::vector<TrackObservation>& frame : drive.frames) {
@@ -203,8 +205,9 @@ TEST_P(TrackerFrameRaysTest, PointsCarryTheRaysOfTheFramesBetweenKeyframes) {
         EXPECT_LE(ray.keyframe, keyframe.keyframe);
         EXPECT_EQ(keyframe_frames.count(ray.frame), 0u) << "frame " << ray.frame;
         EXPECT_GT(ray.frame, every.keyframe_frames[ray.keyframe]);
-        if (ray.keyframe + 1 < static_cast<int>(every.keyframe_frames.size()))
+        if (ray.keyframe + 1 < static_cast<int>(every.keyframe_frames.size())) {
           EXPECT_LT(ray.frame, every.keyframe_frames[ray.keyframe + 1]);
+        }
         const Rigid3d& world_from_rig = drive.world_from_rig[ray.frame];
         const Eigen::Vector3d true_center =
             world_from_rig *
@@ -226,6 +229,27 @@ TEST_P(TrackerFrameRaysTest, PointsCarryTheRaysOfTheFramesBetweenKeyframes) {
   EXPECT_LT(max_center_error, 0.005 * drive.length);
   EXPECT_EQ(outside_view, 0);
   RecordProperty("max_frame_ray_center_error_um", static_cast<int>(1e6 * max_center_error));
+
+  // Thinned to 2 degrees: fewer rays, none within 2 degrees of a ray handed over before it.
+  const double min_angle = 2.0 * M_PI / 180.0;
+  const HandedOver thinned = RunForFrameRays(drive, mode.central, 1, min_angle);
+  size_t frame_rays_thinned = 0, too_close = 0;
+  for (const FinalizedKeyframe& keyframe : thinned.keyframes)
+    for (const FinalizedPoint& point : keyframe.points) {
+      std::vector<Eigen::Vector3d> before;
+      for (const FinalizedRay& ray : point.rays)
+        before.push_back((ray.center - point.position).normalized());
+      for (const FinalizedFrameRay& ray : point.frame_rays) {
+        ++frame_rays_thinned;
+        const Eigen::Vector3d direction = (ray.center - point.position).normalized();
+        for (const Eigen::Vector3d& d : before)
+          too_close += std::acos(std::clamp(d.dot(direction), -1.0, 1.0)) < min_angle - 1e-9;
+        before.push_back(direction);
+      }
+    }
+  EXPECT_EQ(too_close, 0u);
+  EXPECT_GT(frame_rays_thinned, 0u);
+  EXPECT_LT(frame_rays_thinned, frame_rays_every);
   RecordProperty("frame_rays_per_point",
                  static_cast<int>(100.0 * static_cast<double>(frame_rays_every) /
                                   static_cast<double>(std::max<size_t>(points, 1))));

@@ -14,11 +14,16 @@
 // index (no hash map in the inner loops); the δO facets around a vertex are gathered once per
 // call and shared by the checks of all its neighbours; a pair of triangles whose boxes miss, or
 // one certainly on one side of the other's plane (a filter in doubles with a wide error bound),
-// skips the exact tests. The reference path (SmoothingOptions::reference_checks) gathers anew
-// and tests every pair: tests/surface/smoothing_test.cpp checks that both give the same
-// positions.
+// skips the exact tests. The first intersection check of every moved vertex runs in parallel
+// (TBB) on the positions after the Taubin steps; the sequential revert pass keeps a result while
+// no vertex it reads (the vertex, its ring and their neighbours in T) was reverted, and checks
+// again otherwise, so the outcome is that of the sequential checks. The reference path
+// (SmoothingOptions::reference_checks) gathers anew and tests every pair:
+// tests/surface/smoothing_test.cpp checks that both give the same positions.
 
 #include <CGAL/intersections.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -118,11 +123,13 @@ void SurfaceSmoother::Grow(const DelaunayMesh::Impl& t) {
   umbrella_.resize(n, 0);
   slot_stamp_.resize(n, 0);
   star_stamp_.resize(n, 0);
+  dirty_stamp_.resize(n, 0);
   slot_.resize(n, -1);
   star_.resize(n);
   if (++call_ == 0) {  // wrap-around: every stamp is stale
     std::fill(slot_stamp_.begin(), slot_stamp_.end(), 0);
     std::fill(star_stamp_.begin(), star_stamp_.end(), 0);
+    std::fill(dirty_stamp_.begin(), dirty_stamp_.end(), 0);
     call_ = 1;
   }
 }
@@ -130,6 +137,11 @@ void SurfaceSmoother::Grow(const DelaunayMesh::Impl& t) {
 Eigen::Vector3d SurfaceSmoother::Position(VertexHandle v) const {
   const size_t index = static_cast<size_t>(v->info().index);
   return index < out_.size() ? out_[index] : ToEigen(v->point());
+}
+
+void SurfaceSmoother::GatherStarFacets(const DelaunayMesh::Impl& t, const Local& local) {
+  StarFacets(t, local.index);
+  for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) StarFacets(t, ring_[i]);
 }
 
 std::pair<uint32_t, uint32_t> SurfaceSmoother::StarFacets(const DelaunayMesh::Impl& t, int index) {
@@ -150,7 +162,8 @@ std::pair<uint32_t, uint32_t> SurfaceSmoother::StarFacets(const DelaunayMesh::Im
   return star_[index] = {begin, static_cast<uint32_t>(facets_.size())};
 }
 
-bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference) {
+bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference,
+                                  std::vector<Facet>& candidates) const {
   // The umbrella at the current positions and its bounding box: a triangle whose box misses it
   // cannot meet it.
   const Eigen::Vector3d& x = out_[local.index];
@@ -166,7 +179,7 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
 
   // The δO facets of the cells of O around v and its ring whose box meets the umbrella's, each
   // once (a δO facet has one cell in O, so its vertices name it).
-  candidates_.clear();
+  candidates.clear();
   auto consider = [&](const Facet& f) {
     Eigen::AlignedBox3d box(out_[f[0]]);
     box.extend(out_[f[1]]);
@@ -176,7 +189,7 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     if (key[0] > key[1]) std::swap(key[0], key[1]);
     if (key[1] > key[2]) std::swap(key[1], key[2]);
     if (key[0] > key[1]) std::swap(key[0], key[1]);
-    candidates_.push_back(key);
+    candidates.push_back(key);
   };
   if (reference) {
     // Gathered anew: the cells around v and its ring, then their δO facets.
@@ -202,17 +215,17 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     }
   } else {
     auto consider_star = [&](int index) {
-      const auto [begin, end] = StarFacets(t, index);
+      const auto [begin, end] = star_[index];  // gathered by GatherStarFacets
       for (uint32_t i = begin; i < end; ++i) consider(facets_[i]);
     };
     consider_star(local.index);
     for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) consider_star(ring_[i]);
   }
-  std::sort(candidates_.begin(), candidates_.end(), [](const Facet& a, const Facet& b) {
+  std::sort(candidates.begin(), candidates.end(), [](const Facet& a, const Facet& b) {
     return a[0] != b[0] ? a[0] < b[0] : a[1] != b[1] ? a[1] < b[1] : a[2] < b[2];
   });
-  candidates_.erase(std::unique(candidates_.begin(), candidates_.end()), candidates_.end());
-  if (candidates_.empty()) return false;
+  candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  if (candidates.empty()) return false;
 
   // The umbrella's triangles: vertices, CGAL points and boxes.
   struct Mine {
@@ -233,7 +246,7 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     m.box.extend(out_[tr.b]);
     mine.push_back(m);
   }
-  for (const Facet& f : candidates_) {
+  for (const Facet& f : candidates) {
     const Eigen::Vector3d e[3] = {out_[f[0]], out_[f[1]], out_[f[2]]};
     Eigen::AlignedBox3d box(e[0]);
     box.extend(e[1]);
@@ -492,19 +505,66 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
     UmbrellaOf(t.tri, v, umbrella);
     make_local(v, umbrella, /*ring_of_a_only=*/true);
     const Local& local = locals_.back();
-    if (!valid(local, out_[local.index]) || MeetsNearby(t, local, options.reference_checks)) {
+    if (!options.reference_checks) GatherStarFacets(t, local);
+    if (!valid(local, out_[local.index]) ||
+        MeetsNearby(t, local, options.reference_checks, candidates_)) {
       out_[local.index] = local.own;
       moved_[local.index] = 0;
       ++result.rejected;
     }
   }
+  // The first check of every vertex in work reads the positions as they are now: those checks
+  // run in parallel first (the δO facets around the vertices gathered before, the only part
+  // that writes), and the sequential pass below takes a vertex's result from there when no
+  // position it reads has changed since. A check of k reads the positions of k, of its ring and
+  // of the δO facets around them, all vertices of T adjacent to k or to its ring: a revert of j
+  // marks j and its neighbours in T (dirty_stamp_), and k's first result stands while neither k
+  // nor a vertex of its ring is marked. Same outcome as checking each vertex when popped.
+  const bool prechecked = !options.reference_checks && work.size() >= 2;
+  if (prechecked) {
+    for (int k : work) GatherStarFacets(t, locals_[k]);
+    first_check_.assign(num_set, 0);  // 0: none, 1: misses, 2: meets
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, work.size(), 32),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                        thread_local std::vector<Facet> candidates;
+                        for (size_t i = range.begin(); i != range.end(); ++i) {
+                          const Local& local = locals_[work[i]];
+                          first_check_[work[i]] = MeetsNearby(t, local, false, candidates) ? 2 : 1;
+                        }
+                      });
+  }
+  auto dirty = [&](int index) { return dirty_stamp_[index] == call_; };
+  auto first_check_stands = [&](const Local& local) {
+    if (dirty(local.index)) return false;
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) {
+      if (dirty(ring_[i])) return false;
+    }
+    return true;
+  };
+  std::vector<VertexHandle> neighbours;
   while (!work.empty()) {
     const int k = work.back();
     work.pop_back();
     Local& local = locals_[k];
-    if (local.reverts >= 2 || !MeetsNearby(t, local, options.reference_checks)) continue;
+    if (local.reverts >= 2) continue;
+    bool meets;
+    if (prechecked && first_check_[k] != 0) {
+      meets = first_check_stands(local) ? first_check_[k] == 2
+                                        : MeetsNearby(t, local, false, candidates_);
+      first_check_[k] = 0;
+    } else {
+      if (!options.reference_checks) GatherStarFacets(t, local);
+      meets = MeetsNearby(t, local, options.reference_checks, candidates_);
+    }
+    if (!meets) continue;
     ++result.rejected;
     out_[local.index] = ++local.reverts == 1 ? local.previous : local.own;
+    if (prechecked) {
+      dirty_stamp_[local.index] = call_;
+      neighbours.clear();
+      t.tri.finite_adjacent_vertices(local.v, std::back_inserter(neighbours));
+      for (const VertexHandle& w : neighbours) dirty_stamp_[w->info().index] = call_;
+    }
     work.push_back(k);
     for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) {
       if (in_set(ring_[i])) work.push_back(slot_[ring_[i]]);

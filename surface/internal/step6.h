@@ -73,9 +73,15 @@ class SurfaceSmoother {
   void Grow(const DelaunayMesh::Impl& t);
   // The δO facets of the cells of O around vertex `index`, gathered once per call.
   std::pair<uint32_t, uint32_t> StarFacets(const DelaunayMesh::Impl& t, int index);
+  // StarFacets of the vertex of `local` and of its ring (before MeetsNearby, which only reads
+  // them, so that checks may run in parallel).
+  void GatherStarFacets(const DelaunayMesh::Impl& t, const Local& local);
   // Whether the umbrella of `local` at the current positions meets a δO triangle of the cells
-  // of O around the vertex or its ring (the vertex's triangles against the others).
-  bool MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference);
+  // of O around the vertex or its ring (the vertex's triangles against the others). Without
+  // `reference`, the facets around them must have been gathered (GatherStarFacets); then it
+  // writes only `candidates` (scratch) and may run in parallel.
+  bool MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference,
+                   std::vector<Facet>& candidates) const;
 
   // By vertex index: the output position (its point when not smoothed), whether it differs
   // from the point, and the hash of the δO umbrella (when has_umbrella_).
@@ -87,6 +93,10 @@ class SurfaceSmoother {
   // the vertices met (star_ by vertex index, valid when star_stamp_ equals call_).
   uint32_t call_ = 0;
   std::vector<uint32_t> slot_stamp_, star_stamp_;
+  // By vertex index: equal to call_ when a revert in this call moved the vertex or a neighbour
+  // in T (a first check of a vertex is then taken again, see UpdateVertices).
+  std::vector<uint32_t> dirty_stamp_;
+  std::vector<uint8_t> first_check_;  // by slot: the parallel first check (0 none, 1, 2 meets)
   std::vector<int> slot_;
   std::vector<std::pair<uint32_t, uint32_t>> star_;
   std::vector<Local> locals_;

@@ -198,11 +198,12 @@ TEST(Smoothing, MovesNoVertexOutsideTheKeyframeBall) {
 
 // The fast local intersection checks (δO triangles around each vertex gathered once per keyframe,
 // a box filter per triangle pair) against the reference (gathered anew for every check, no
-// filter): after every keyframe, the same smoothed position for every vertex and the same
-// counts; and after every keyframe no two triangles of the smoothed surface intersect (brute
-// force over all pairs whose boxes meet). (Flips are checked at the end of the runs above: a
-// vertex sent back to its previous position by the intersection checks is not flip-checked, and
-// a triangle can stay turned for some keyframes.)
+// filter; the fast path also runs the first check of every moved vertex in parallel and keeps
+// its result while no position it reads was reverted): after every keyframe, the same smoothed
+// position for every vertex and the same counts; and after every keyframe no two triangles of the
+// smoothed surface intersect (brute force over all pairs whose boxes meet). (Flips are checked at
+// the end of the runs above: a vertex sent back to its previous position by the intersection checks
+// is not flip-checked, and a triangle can stay turned for some keyframes.)
 void ExpectFastChecksMatchReference(const std::vector<SurfaceKeyframe>& drive, double radius) {
   SculptorOptions fast;
   fast.scale = 1.0;

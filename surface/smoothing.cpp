@@ -87,31 +87,38 @@ uint64_t UmbrellaHash(const std::vector<UmbrellaTriangle>& umbrella) {
   return h;
 }
 
-// The side of q with respect to the oriented plane of (p0, p1, p2): +1 or -1 when certain
+// The plane of a triangle (p0, p1, p2) for a filter in doubles: Side(q) is +1 or -1 when certain
 // (then the sign of CGAL::orientation(p0, p1, p2, q)), 0 when q is too near the plane to tell in
 // doubles. The bound is over 100 times the rounding error of the determinant (CGAL's static
-// filter for orientation_3 uses 5.1e-15 for the same product of coordinate ranges).
-inline int CertainSide(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
-                       const Eigen::Vector3d& p2, const Eigen::Vector3d& q) {
-  const Eigen::Vector3d a = p1 - p0, b = p2 - p0, c = q - p0;
-  const double det = a.cross(b).dot(c);
-  const Eigen::Vector3d range = a.cwiseAbs().cwiseMax(b.cwiseAbs()).cwiseMax(c.cwiseAbs());
-  const double bound = 1e-12 * range.x() * range.y() * range.z();
-  return det > bound ? 1 : det < -bound ? -1 : 0;
-}
-
-// Whether the points are all certainly on one side of the plane of (p0, p1, p2).
-inline bool CertainlyAside(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
-                           const Eigen::Vector3d& p2,
-                           std::initializer_list<Eigen::Vector3d> points) {
-  int first = 0;
-  for (const Eigen::Vector3d& q : points) {
-    const int side = CertainSide(p0, p1, p2, q);
-    if (side == 0 || (first != 0 && side != first)) return false;
-    first = side;
+// filter for orientation_3 uses 5.1e-15 for the same product of coordinate ranges). The normal
+// and the ranges of the edges are computed once per triangle, not per point.
+struct PlaneFilter {
+  PlaneFilter() = default;
+  PlaneFilter(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& p2)
+      : origin(p0) {
+    const Eigen::Vector3d a = p1 - p0, b = p2 - p0;
+    normal = a.cross(b);
+    edge_range = a.cwiseAbs().cwiseMax(b.cwiseAbs());
   }
-  return true;
-}
+  int Side(const Eigen::Vector3d& q) const {
+    const Eigen::Vector3d c = q - origin;
+    const double det = normal.dot(c);
+    const Eigen::Vector3d range = edge_range.cwiseMax(c.cwiseAbs());
+    const double bound = 1e-12 * range.x() * range.y() * range.z();
+    return det > bound ? 1 : det < -bound ? -1 : 0;
+  }
+  // Whether the points are all certainly on one side of the plane.
+  bool Aside(std::initializer_list<Eigen::Vector3d> points) const {
+    int first = 0;
+    for (const Eigen::Vector3d& q : points) {
+      const int side = Side(q);
+      if (side == 0 || (first != 0 && side != first)) return false;
+      first = side;
+    }
+    return true;
+  }
+  Eigen::Vector3d origin, normal, edge_range;
+};
 
 }  // namespace
 
@@ -155,7 +162,7 @@ std::pair<uint32_t, uint32_t> SurfaceSmoother::StarFacets(const DelaunayMesh::Im
     for (int k = 0; k < 4; ++k) {
       if (c->neighbor(k)->info().in_o) continue;
       facets_.push_back({c->vertex((k + 1) & 3)->info().index, c->vertex((k + 2) & 3)->info().index,
-                         c->vertex((k + 3) & 3)->info().index});
+                         c->vertex((k + 3) & 3)->info().index, c->vertex(k)->info().index});
     }
   }
   star_stamp_[index] = call_;
@@ -213,18 +220,43 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
                   c->vertex((k + 3) & 3)->info().index});
       }
     }
+    std::sort(candidates.begin(), candidates.end(), [](const Facet& a, const Facet& b) {
+      return a[0] != b[0] ? a[0] < b[0] : a[1] != b[1] ? a[1] < b[1] : a[2] < b[2];
+    });
+    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
   } else {
-    auto consider_star = [&](int index) {
-      const auto [begin, end] = star_[index];  // gathered by GatherStarFacets
-      for (uint32_t i = begin; i < end; ++i) consider(facets_[i]);
+    // The stars of S = (v, its ring...) in that order. A δO facet is listed in the star of each
+    // vertex of its cell (of O, one per facet), so it is taken from the first star of S that
+    // lists it: the one of the first vertex of S among its cell's four, none earlier (no sort).
+    thread_local std::vector<uint32_t> order_stamp;
+    thread_local std::vector<uint32_t> order_of;
+    thread_local uint32_t order_query = 0;
+    if (order_stamp.size() < out_.size() || order_query == 0xffffffffu) {
+      order_stamp.assign(out_.size(), 0);
+      order_of.resize(out_.size());
+      order_query = 0;
+    }
+    const uint32_t query = ++order_query;
+    auto first_in_s = [&](int index, uint32_t order) {
+      return !(order_stamp[index] == query && order_of[index] < order);
     };
-    consider_star(local.index);
-    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) consider_star(ring_[i]);
+    auto consider_star = [&](int index, uint32_t order) {
+      if (order_stamp[index] == query) return;  // a repeated vertex of S
+      order_stamp[index] = query;
+      order_of[index] = order;
+      const auto [begin, end] = star_[index];  // gathered by GatherStarFacets
+      for (uint32_t i = begin; i < end; ++i) {
+        const StarFacet& f = facets_[i];
+        if (first_in_s(f[0], order) && first_in_s(f[1], order) && first_in_s(f[2], order) &&
+            first_in_s(f[3], order)) {
+          consider({f[0], f[1], f[2]});
+        }
+      }
+    };
+    uint32_t order = 0;
+    consider_star(local.index, order++);
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) consider_star(ring_[i], order++);
   }
-  std::sort(candidates.begin(), candidates.end(), [](const Facet& a, const Facet& b) {
-    return a[0] != b[0] ? a[0] < b[0] : a[1] != b[1] ? a[1] < b[1] : a[2] < b[2];
-  });
-  candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
   if (candidates.empty()) return false;
 
   // The umbrella's triangles: vertices, CGAL points and boxes.
@@ -233,6 +265,7 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     Eigen::Vector3d x[3];
     Point p[3];
     Eigen::AlignedBox3d box;
+    PlaneFilter plane;
   };
   thread_local std::vector<Mine> mine;
   mine.clear();
@@ -241,9 +274,11 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     Mine m{{local.index, tr.a, tr.b},
            {x, out_[tr.a], out_[tr.b]},
            {ToCgal(x), ToCgal(out_[tr.a]), ToCgal(out_[tr.b])},
-           Eigen::AlignedBox3d(x)};
+           Eigen::AlignedBox3d(x),
+           PlaneFilter()};
     m.box.extend(out_[tr.a]);
     m.box.extend(out_[tr.b]);
+    if (!reference) m.plane = PlaneFilter(m.x[0], m.x[1], m.x[2]);
     mine.push_back(m);
   }
   for (const Facet& f : candidates) {
@@ -253,6 +288,8 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     box.extend(e[2]);
     const Point q[3] = {ToCgal(e[0]), ToCgal(e[1]), ToCgal(e[2])};
     const Kernel::Triangle_3 other_triangle(q[0], q[1], q[2]);
+    PlaneFilter other_plane;
+    bool other_plane_made = false;
     for (const Mine& m : mine) {
       // Closed triangles that meet have meeting boxes (the same doubles): exact to skip.
       if (!reference && !m.box.intersects(box)) continue;
@@ -266,18 +303,16 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
       if (!reference) {
         // Filter in doubles before the exact tests: a triangle or an edge certainly on one side
         // of the other triangle's plane misses it.
-        const Eigen::Vector3d& m0 = m.x[0];
-        const Eigen::Vector3d& m1 = m.x[1];
-        const Eigen::Vector3d& m2 = m.x[2];
+        if (!other_plane_made) {
+          other_plane = PlaneFilter(e[0], e[1], e[2]);
+          other_plane_made = true;
+        }
         if (shared == 0) {
-          if (CertainlyAside(m0, m1, m2, {e[0], e[1], e[2]}) ||
-              CertainlyAside(e[0], e[1], e[2], {m0, m1, m2})) {
+          if (m.plane.Aside({e[0], e[1], e[2]}) || other_plane.Aside({m.x[0], m.x[1], m.x[2]})) {
             continue;
           }
-        } else if (CertainlyAside(m0, m1, m2,
-                                  {e[(shared_other + 1) % 3], e[(shared_other + 2) % 3]}) &&
-                   CertainlyAside(e[0], e[1], e[2],
-                                  {m.x[(shared_mine + 1) % 3], m.x[(shared_mine + 2) % 3]})) {
+        } else if (m.plane.Aside({e[(shared_other + 1) % 3], e[(shared_other + 2) % 3]}) &&
+                   other_plane.Aside({m.x[(shared_mine + 1) % 3], m.x[(shared_mine + 2) % 3]})) {
           continue;
         }
       }

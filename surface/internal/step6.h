@@ -69,6 +69,8 @@ class SurfaceSmoother {
     int reverts = 0;
   };
   using Facet = std::array<int, 3>;  // a δO triangle by vertex index
+  // A δO triangle by vertex index, then the fourth vertex of its cell of O.
+  using StarFacet = std::array<int, 4>;
 
   void Grow(const DelaunayMesh::Impl& t);
   // The δO facets of the cells of O around vertex `index`, gathered once per call.
@@ -102,7 +104,8 @@ class SurfaceSmoother {
   std::vector<Local> locals_;
   std::vector<Triangle> triangles_;
   std::vector<int> ring_;
-  std::vector<Facet> facets_, candidates_;
+  std::vector<StarFacet> facets_;
+  std::vector<Facet> candidates_;
 };
 
 }  // namespace omni::internal

@@ -58,9 +58,12 @@ struct UmbrellaTriangle {
 };
 
 // The δO triangles around v; empty when v is not on δO.
-void UmbrellaOf(const Delaunay& tri, VertexHandle v, std::vector<UmbrellaTriangle>& out) {
+void UmbrellaOf(const DelaunayMesh::Impl& t, VertexHandle v, std::vector<UmbrellaTriangle>& out) {
   out.clear();
-  ForEachBorderTriangleAround(tri, v, [&](CellHandle c, int k, VertexHandle a, VertexHandle b) {
+  thread_local std::vector<CellHandle> star;
+  star.clear();
+  t.IncidentCells(v, star);  // the cells in the order of CGAL's incident_cells
+  ForEachBorderTriangleIn(star, v, [&](CellHandle c, int k, VertexHandle a, VertexHandle b) {
     // Counter-clockwise seen from O: the cell's vertex k (on O's side) above (v, a, b).
     if (CGAL::orientation(v->point(), a->point(), b->point(), c->vertex(k)->point()) ==
         CGAL::NEGATIVE) {
@@ -155,7 +158,7 @@ std::pair<uint32_t, uint32_t> SurfaceSmoother::StarFacets(const DelaunayMesh::Im
   if (star_stamp_[index] == call_) return star_[index];
   thread_local std::vector<CellHandle> star;
   star.clear();
-  t.tri.incident_cells(t.vertices[index], std::back_inserter(star));
+  t.IncidentCells(t.vertices[index], star);  // CGAL's incident_cells without its allocations
   const uint32_t begin = static_cast<uint32_t>(facets_.size());
   for (const CellHandle& c : star) {
     if (!c->info().in_o) continue;  // cells of O are finite
@@ -401,7 +404,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   auto add = [&](VertexHandle v, bool known) {
     const int index = v->info().index;
     if (in_set(index)) return;
-    if (!known) UmbrellaOf(t.tri, v, umbrella);
+    if (!known) UmbrellaOf(t, v, umbrella);
     slot_stamp_[index] = call_;
     slot_[index] = static_cast<int>(locals_.size());
     make_local(v, umbrella, false);
@@ -411,7 +414,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   std::vector<int> changed;                   // slots of the vertices whose umbrella changed
   for (const VertexHandle& v : vertices) {
     const int index = v->info().index;
-    UmbrellaOf(t.tri, v, umbrella);
+    UmbrellaOf(t, v, umbrella);
     if (umbrella.empty()) {
       out_[index] = ToEigen(v->point());
       moved_[index] = 0;
@@ -537,7 +540,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   for (const VertexHandle& v : changed_outside) {
     // Outside the ball a vertex keeps its position, unless its new umbrella meets something
     // there (then it goes back to its own point, like a vertex new to δO).
-    UmbrellaOf(t.tri, v, umbrella);
+    UmbrellaOf(t, v, umbrella);
     make_local(v, umbrella, /*ring_of_a_only=*/true);
     const Local& local = locals_.back();
     if (!options.reference_checks) GatherStarFacets(t, local);

@@ -57,20 +57,31 @@ struct UmbrellaTriangle {
   VertexHandle a, b;
 };
 
-// The δO triangles around v; empty when v is not on δO.
-void UmbrellaOf(const DelaunayMesh::Impl& t, VertexHandle v, std::vector<UmbrellaTriangle>& out) {
+// The δO triangles around v among the cells of its star [begin, end); empty when v is not on
+// δO.
+void UmbrellaOf(VertexHandle v, const CellHandle* begin, const CellHandle* end,
+                std::vector<UmbrellaTriangle>& out) {
   out.clear();
-  thread_local std::vector<CellHandle> star;
-  star.clear();
-  t.IncidentCells(v, star);  // the cells in the order of CGAL's incident_cells
-  ForEachBorderTriangleIn(star, v, [&](CellHandle c, int k, VertexHandle a, VertexHandle b) {
-    // Counter-clockwise seen from O: the cell's vertex k (on O's side) above (v, a, b).
-    if (CGAL::orientation(v->point(), a->point(), b->point(), c->vertex(k)->point()) ==
-        CGAL::NEGATIVE) {
-      std::swap(a, b);
+  for (const CellHandle* it = begin; it != end; ++it) {
+    const CellHandle& c = *it;
+    if (!c->info().in_o) continue;
+    const int i = c->index(v);
+    for (int k = 0; k < 4; ++k) {
+      if (k == i || c->neighbor(k)->info().in_o) continue;
+      VertexHandle e[2];
+      int n = 0;
+      for (int m = 0; m < 4; ++m) {
+        if (m != i && m != k) e[n++] = c->vertex(m);
+      }
+      VertexHandle a = e[0], b = e[1];
+      // Counter-clockwise seen from O: the cell's vertex k (on O's side) above (v, a, b).
+      if (CGAL::orientation(v->point(), a->point(), b->point(), c->vertex(k)->point()) ==
+          CGAL::NEGATIVE) {
+        std::swap(a, b);
+      }
+      out.push_back({a, b});
     }
-    out.push_back({a, b});
-  });
+  }
 }
 
 uint64_t UmbrellaHash(const std::vector<UmbrellaTriangle>& umbrella) {
@@ -133,12 +144,15 @@ void SurfaceSmoother::Grow(const DelaunayMesh::Impl& t) {
   umbrella_.resize(n, 0);
   slot_stamp_.resize(n, 0);
   star_stamp_.resize(n, 0);
+  star_cells_stamp_.resize(n, 0);
+  star_cells_range_.resize(n);
   dirty_stamp_.resize(n, 0);
   slot_.resize(n, -1);
   star_.resize(n);
   if (++call_ == 0) {  // wrap-around: every stamp is stale
     std::fill(slot_stamp_.begin(), slot_stamp_.end(), 0);
     std::fill(star_stamp_.begin(), star_stamp_.end(), 0);
+    std::fill(star_cells_stamp_.begin(), star_cells_stamp_.end(), 0);
     std::fill(dirty_stamp_.begin(), dirty_stamp_.end(), 0);
     call_ = 1;
   }
@@ -149,6 +163,14 @@ Eigen::Vector3d SurfaceSmoother::Position(VertexHandle v) const {
   return index < out_.size() ? out_[index] : ToEigen(v->point());
 }
 
+std::pair<uint32_t, uint32_t> SurfaceSmoother::Star(const DelaunayMesh::Impl& t, int index) {
+  if (star_cells_stamp_[index] == call_) return star_cells_range_[index];
+  const uint32_t begin = static_cast<uint32_t>(star_cells_.size());
+  t.IncidentCells(t.vertices[index], star_cells_);  // appends, in CGAL's incident_cells order
+  star_cells_stamp_[index] = call_;
+  return star_cells_range_[index] = {begin, static_cast<uint32_t>(star_cells_.size())};
+}
+
 void SurfaceSmoother::GatherStarFacets(const DelaunayMesh::Impl& t, const Local& local) {
   StarFacets(t, local.index);
   for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) StarFacets(t, ring_[i]);
@@ -156,11 +178,10 @@ void SurfaceSmoother::GatherStarFacets(const DelaunayMesh::Impl& t, const Local&
 
 std::pair<uint32_t, uint32_t> SurfaceSmoother::StarFacets(const DelaunayMesh::Impl& t, int index) {
   if (star_stamp_[index] == call_) return star_[index];
-  thread_local std::vector<CellHandle> star;
-  star.clear();
-  t.IncidentCells(t.vertices[index], star);  // CGAL's incident_cells without its allocations
+  const auto [star_begin, star_end] = Star(t, index);
   const uint32_t begin = static_cast<uint32_t>(facets_.size());
-  for (const CellHandle& c : star) {
+  for (uint32_t s = star_begin; s < star_end; ++s) {
+    const CellHandle c = star_cells_[s];
     if (!c->info().in_o) continue;  // cells of O are finite
     for (int k = 0; k < 4; ++k) {
       if (c->neighbor(k)->info().in_o) continue;
@@ -361,6 +382,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   triangles_.clear();
   ring_.clear();
   facets_.clear();
+  star_cells_.clear();
   const double radius2 = radius * radius;
   auto in_ball = [&](VertexHandle v) {
     return (ToEigen(v->point()) - centre).squaredNorm() < radius2;
@@ -401,10 +423,14 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
     locals_.push_back(local);
   };
   std::vector<UmbrellaTriangle> umbrella;
+  auto umbrella_of = [&](VertexHandle v) {  // its star kept for StarFacets
+    const auto [begin, end] = Star(t, v->info().index);
+    UmbrellaOf(v, star_cells_.data() + begin, star_cells_.data() + end, umbrella);
+  };
   auto add = [&](VertexHandle v, bool known) {
     const int index = v->info().index;
     if (in_set(index)) return;
-    if (!known) UmbrellaOf(t, v, umbrella);
+    if (!known) umbrella_of(v);
     slot_stamp_[index] = call_;
     slot_[index] = static_cast<int>(locals_.size());
     make_local(v, umbrella, false);
@@ -414,7 +440,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   std::vector<int> changed;                   // slots of the vertices whose umbrella changed
   for (const VertexHandle& v : vertices) {
     const int index = v->info().index;
-    UmbrellaOf(t, v, umbrella);
+    umbrella_of(v);
     if (umbrella.empty()) {
       out_[index] = ToEigen(v->point());
       moved_[index] = 0;
@@ -540,7 +566,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   for (const VertexHandle& v : changed_outside) {
     // Outside the ball a vertex keeps its position, unless its new umbrella meets something
     // there (then it goes back to its own point, like a vertex new to δO).
-    UmbrellaOf(t, v, umbrella);
+    umbrella_of(v);
     make_local(v, umbrella, /*ring_of_a_only=*/true);
     const Local& local = locals_.back();
     if (!options.reference_checks) GatherStarFacets(t, local);

@@ -73,6 +73,8 @@ class SurfaceSmoother {
   using StarFacet = std::array<int, 4>;
 
   void Grow(const DelaunayMesh::Impl& t);
+  // The cells around vertex `index` (a range of star_cells_), gathered once per call.
+  std::pair<uint32_t, uint32_t> Star(const DelaunayMesh::Impl& t, int index);
   // The δO facets of the cells of O around vertex `index`, gathered once per call.
   std::pair<uint32_t, uint32_t> StarFacets(const DelaunayMesh::Impl& t, int index);
   // StarFacets of the vertex of `local` and of its ring (before MeetsNearby, which only reads
@@ -98,6 +100,11 @@ class SurfaceSmoother {
   // By vertex index: equal to call_ when a revert in this call moved the vertex or a neighbour
   // in T (a first check of a vertex is then taken again, see UpdateVertices).
   std::vector<uint32_t> dirty_stamp_;
+  // The stars of Star: star_cells_range_ by vertex index, valid when star_cells_stamp_ equals
+  // call_.
+  std::vector<CellHandle> star_cells_;
+  std::vector<std::pair<uint32_t, uint32_t>> star_cells_range_;
+  std::vector<uint32_t> star_cells_stamp_;
   std::vector<uint8_t> first_check_;  // by slot: the parallel first check (0 none, 1, 2 meets)
   std::vector<int> slot_;
   std::vector<std::pair<uint32_t, uint32_t>> star_;

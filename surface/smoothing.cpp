@@ -588,6 +588,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   if (prechecked) {
     for (int k : work) GatherStarFacets(t, locals_[k]);
     first_check_.assign(num_set, 0);  // 0: none, 1: misses, 2: meets
+    result.prechecked = work.size();
     tbb::parallel_for(tbb::blocked_range<size_t>(0, work.size(), 32),
                       [&](const tbb::blocked_range<size_t>& range) {
                         thread_local std::vector<Facet> candidates;
@@ -613,8 +614,12 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
     if (local.reverts >= 2) continue;
     bool meets;
     if (prechecked && first_check_[k] != 0) {
-      meets = first_check_stands(local) ? first_check_[k] == 2
-                                        : MeetsNearby(t, local, false, candidates_);
+      if (first_check_stands(local)) {
+        meets = first_check_[k] == 2;
+      } else {
+        meets = MeetsNearby(t, local, false, candidates_);
+        ++result.rechecked;
+      }
       first_check_[k] = 0;
     } else {
       if (!options.reference_checks) GatherStarFacets(t, local);

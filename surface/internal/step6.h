@@ -33,6 +33,9 @@ GenusRefinementResult RefineGenus(DelaunayMesh::Impl& t, const std::vector<CellH
 struct SmoothingResult {
   size_t vertices = 0;  // δO vertices recomputed
   size_t rejected = 0;  // moves rejected (flip, degenerate or local intersection)
+  // Intersection checks run in parallel first, and those of them taken again because a vertex
+  // they read was sent back meanwhile (0 with SmoothingOptions::reference_checks).
+  size_t prechecked = 0, rechecked = 0;
 };
 
 // The smoothed positions of the δO vertices, kept beside T (whose vertices never move).

@@ -1462,6 +1462,8 @@ struct IncrementalSculptor::Impl {
                  : smoother.Update(t, active, centre, radius, options.smoothing);
     st.smoothed_vertices = smoothing.vertices;
     st.smoothing_rejected = smoothing.rejected;
+    st.smoothing_prechecked = smoothing.prechecked;
+    st.smoothing_rechecked = smoothing.rechecked;
     st.ms_smooth = MsSince(tick);
   }
 

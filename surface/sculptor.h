@@ -246,6 +246,9 @@ struct KeyframeStats {
   long genus_euler_change = 0;
   // Smoothing: δO vertices recomputed, moves rejected (flip or local intersection).
   size_t smoothed_vertices = 0, smoothing_rejected = 0;
+  // Of the smoothing's intersection checks run in parallel first, those taken again because a
+  // vertex they read was sent back meanwhile. Not in the CSV row.
+  size_t smoothing_prechecked = 0, smoothing_rechecked = 0;
   double ms_genus = 0, ms_smooth = 0;
   // Step 4 details (§4.4): old rays proposed by the ray index before the exact selection, cells
   // visited by the re-traced old rays, and the milliseconds of the selection (which runs beside

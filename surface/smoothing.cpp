@@ -14,11 +14,16 @@
 // index (no hash map in the inner loops); the δO facets around a vertex are gathered once per
 // call and shared by the checks of all its neighbours; a pair of triangles whose boxes miss, or
 // one certainly on one side of the other's plane (a filter in doubles with a wide error bound),
-// skips the exact tests. The reference path (SmoothingOptions::reference_checks) gathers anew
-// and tests every pair: tests/surface/smoothing_test.cpp checks that both give the same
-// positions.
+// skips the exact tests. The first intersection check of every moved vertex runs in parallel
+// (TBB) on the positions after the Taubin steps; the sequential revert pass keeps a result while
+// no vertex it reads (the vertex, its ring and their neighbours in T) was reverted, and checks
+// again otherwise, so the outcome is that of the sequential checks. The reference path
+// (SmoothingOptions::reference_checks) gathers anew and tests every pair:
+// tests/surface/smoothing_test.cpp checks that both give the same positions.
 
 #include <CGAL/intersections.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -52,17 +57,31 @@ struct UmbrellaTriangle {
   VertexHandle a, b;
 };
 
-// The δO triangles around v; empty when v is not on δO.
-void UmbrellaOf(const Delaunay& tri, VertexHandle v, std::vector<UmbrellaTriangle>& out) {
+// The δO triangles around v among the cells of its star [begin, end); empty when v is not on
+// δO.
+void UmbrellaOf(VertexHandle v, const CellHandle* begin, const CellHandle* end,
+                std::vector<UmbrellaTriangle>& out) {
   out.clear();
-  ForEachBorderTriangleAround(tri, v, [&](CellHandle c, int k, VertexHandle a, VertexHandle b) {
-    // Counter-clockwise seen from O: the cell's vertex k (on O's side) above (v, a, b).
-    if (CGAL::orientation(v->point(), a->point(), b->point(), c->vertex(k)->point()) ==
-        CGAL::NEGATIVE) {
-      std::swap(a, b);
+  for (const CellHandle* it = begin; it != end; ++it) {
+    const CellHandle& c = *it;
+    if (!c->info().in_o) continue;
+    const int i = c->index(v);
+    for (int k = 0; k < 4; ++k) {
+      if (k == i || c->neighbor(k)->info().in_o) continue;
+      VertexHandle e[2];
+      int n = 0;
+      for (int m = 0; m < 4; ++m) {
+        if (m != i && m != k) e[n++] = c->vertex(m);
+      }
+      VertexHandle a = e[0], b = e[1];
+      // Counter-clockwise seen from O: the cell's vertex k (on O's side) above (v, a, b).
+      if (CGAL::orientation(v->point(), a->point(), b->point(), c->vertex(k)->point()) ==
+          CGAL::NEGATIVE) {
+        std::swap(a, b);
+      }
+      out.push_back({a, b});
     }
-    out.push_back({a, b});
-  });
+  }
 }
 
 uint64_t UmbrellaHash(const std::vector<UmbrellaTriangle>& umbrella) {
@@ -82,31 +101,38 @@ uint64_t UmbrellaHash(const std::vector<UmbrellaTriangle>& umbrella) {
   return h;
 }
 
-// The side of q with respect to the oriented plane of (p0, p1, p2): +1 or -1 when certain
+// The plane of a triangle (p0, p1, p2) for a filter in doubles: Side(q) is +1 or -1 when certain
 // (then the sign of CGAL::orientation(p0, p1, p2, q)), 0 when q is too near the plane to tell in
 // doubles. The bound is over 100 times the rounding error of the determinant (CGAL's static
-// filter for orientation_3 uses 5.1e-15 for the same product of coordinate ranges).
-inline int CertainSide(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
-                       const Eigen::Vector3d& p2, const Eigen::Vector3d& q) {
-  const Eigen::Vector3d a = p1 - p0, b = p2 - p0, c = q - p0;
-  const double det = a.cross(b).dot(c);
-  const Eigen::Vector3d range = a.cwiseAbs().cwiseMax(b.cwiseAbs()).cwiseMax(c.cwiseAbs());
-  const double bound = 1e-12 * range.x() * range.y() * range.z();
-  return det > bound ? 1 : det < -bound ? -1 : 0;
-}
-
-// Whether the points are all certainly on one side of the plane of (p0, p1, p2).
-inline bool CertainlyAside(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
-                           const Eigen::Vector3d& p2,
-                           std::initializer_list<Eigen::Vector3d> points) {
-  int first = 0;
-  for (const Eigen::Vector3d& q : points) {
-    const int side = CertainSide(p0, p1, p2, q);
-    if (side == 0 || (first != 0 && side != first)) return false;
-    first = side;
+// filter for orientation_3 uses 5.1e-15 for the same product of coordinate ranges). The normal
+// and the ranges of the edges are computed once per triangle, not per point.
+struct PlaneFilter {
+  PlaneFilter() = default;
+  PlaneFilter(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& p2)
+      : origin(p0) {
+    const Eigen::Vector3d a = p1 - p0, b = p2 - p0;
+    normal = a.cross(b);
+    edge_range = a.cwiseAbs().cwiseMax(b.cwiseAbs());
   }
-  return true;
-}
+  int Side(const Eigen::Vector3d& q) const {
+    const Eigen::Vector3d c = q - origin;
+    const double det = normal.dot(c);
+    const Eigen::Vector3d range = edge_range.cwiseMax(c.cwiseAbs());
+    const double bound = 1e-12 * range.x() * range.y() * range.z();
+    return det > bound ? 1 : det < -bound ? -1 : 0;
+  }
+  // Whether the points are all certainly on one side of the plane.
+  bool Aside(std::initializer_list<Eigen::Vector3d> points) const {
+    int first = 0;
+    for (const Eigen::Vector3d& q : points) {
+      const int side = Side(q);
+      if (side == 0 || (first != 0 && side != first)) return false;
+      first = side;
+    }
+    return true;
+  }
+  Eigen::Vector3d origin, normal, edge_range;
+};
 
 }  // namespace
 
@@ -118,11 +144,16 @@ void SurfaceSmoother::Grow(const DelaunayMesh::Impl& t) {
   umbrella_.resize(n, 0);
   slot_stamp_.resize(n, 0);
   star_stamp_.resize(n, 0);
+  star_cells_stamp_.resize(n, 0);
+  star_cells_range_.resize(n);
+  dirty_stamp_.resize(n, 0);
   slot_.resize(n, -1);
   star_.resize(n);
   if (++call_ == 0) {  // wrap-around: every stamp is stale
     std::fill(slot_stamp_.begin(), slot_stamp_.end(), 0);
     std::fill(star_stamp_.begin(), star_stamp_.end(), 0);
+    std::fill(star_cells_stamp_.begin(), star_cells_stamp_.end(), 0);
+    std::fill(dirty_stamp_.begin(), dirty_stamp_.end(), 0);
     call_ = 1;
   }
 }
@@ -132,25 +163,38 @@ Eigen::Vector3d SurfaceSmoother::Position(VertexHandle v) const {
   return index < out_.size() ? out_[index] : ToEigen(v->point());
 }
 
+std::pair<uint32_t, uint32_t> SurfaceSmoother::Star(const DelaunayMesh::Impl& t, int index) {
+  if (star_cells_stamp_[index] == call_) return star_cells_range_[index];
+  const uint32_t begin = static_cast<uint32_t>(star_cells_.size());
+  t.IncidentCells(t.vertices[index], star_cells_);  // appends, in CGAL's incident_cells order
+  star_cells_stamp_[index] = call_;
+  return star_cells_range_[index] = {begin, static_cast<uint32_t>(star_cells_.size())};
+}
+
+void SurfaceSmoother::GatherStarFacets(const DelaunayMesh::Impl& t, const Local& local) {
+  StarFacets(t, local.index);
+  for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) StarFacets(t, ring_[i]);
+}
+
 std::pair<uint32_t, uint32_t> SurfaceSmoother::StarFacets(const DelaunayMesh::Impl& t, int index) {
   if (star_stamp_[index] == call_) return star_[index];
-  thread_local std::vector<CellHandle> star;
-  star.clear();
-  t.tri.incident_cells(t.vertices[index], std::back_inserter(star));
+  const auto [star_begin, star_end] = Star(t, index);
   const uint32_t begin = static_cast<uint32_t>(facets_.size());
-  for (const CellHandle& c : star) {
+  for (uint32_t s = star_begin; s < star_end; ++s) {
+    const CellHandle c = star_cells_[s];
     if (!c->info().in_o) continue;  // cells of O are finite
     for (int k = 0; k < 4; ++k) {
       if (c->neighbor(k)->info().in_o) continue;
       facets_.push_back({c->vertex((k + 1) & 3)->info().index, c->vertex((k + 2) & 3)->info().index,
-                         c->vertex((k + 3) & 3)->info().index});
+                         c->vertex((k + 3) & 3)->info().index, c->vertex(k)->info().index});
     }
   }
   star_stamp_[index] = call_;
   return star_[index] = {begin, static_cast<uint32_t>(facets_.size())};
 }
 
-bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference) {
+bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference,
+                                  std::vector<Facet>& candidates) const {
   // The umbrella at the current positions and its bounding box: a triangle whose box misses it
   // cannot meet it.
   const Eigen::Vector3d& x = out_[local.index];
@@ -166,7 +210,7 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
 
   // The δO facets of the cells of O around v and its ring whose box meets the umbrella's, each
   // once (a δO facet has one cell in O, so its vertices name it).
-  candidates_.clear();
+  candidates.clear();
   auto consider = [&](const Facet& f) {
     Eigen::AlignedBox3d box(out_[f[0]]);
     box.extend(out_[f[1]]);
@@ -176,7 +220,7 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     if (key[0] > key[1]) std::swap(key[0], key[1]);
     if (key[1] > key[2]) std::swap(key[1], key[2]);
     if (key[0] > key[1]) std::swap(key[0], key[1]);
-    candidates_.push_back(key);
+    candidates.push_back(key);
   };
   if (reference) {
     // Gathered anew: the cells around v and its ring, then their δO facets.
@@ -200,19 +244,44 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
                   c->vertex((k + 3) & 3)->info().index});
       }
     }
+    std::sort(candidates.begin(), candidates.end(), [](const Facet& a, const Facet& b) {
+      return a[0] != b[0] ? a[0] < b[0] : a[1] != b[1] ? a[1] < b[1] : a[2] < b[2];
+    });
+    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
   } else {
-    auto consider_star = [&](int index) {
-      const auto [begin, end] = StarFacets(t, index);
-      for (uint32_t i = begin; i < end; ++i) consider(facets_[i]);
+    // The stars of S = (v, its ring...) in that order. A δO facet is listed in the star of each
+    // vertex of its cell (of O, one per facet), so it is taken from the first star of S that
+    // lists it: the one of the first vertex of S among its cell's four, none earlier (no sort).
+    thread_local std::vector<uint32_t> order_stamp;
+    thread_local std::vector<uint32_t> order_of;
+    thread_local uint32_t order_query = 0;
+    if (order_stamp.size() < out_.size() || order_query == 0xffffffffu) {
+      order_stamp.assign(out_.size(), 0);
+      order_of.resize(out_.size());
+      order_query = 0;
+    }
+    const uint32_t query = ++order_query;
+    auto first_in_s = [&](int index, uint32_t order) {
+      return !(order_stamp[index] == query && order_of[index] < order);
     };
-    consider_star(local.index);
-    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) consider_star(ring_[i]);
+    auto consider_star = [&](int index, uint32_t order) {
+      if (order_stamp[index] == query) return;  // a repeated vertex of S
+      order_stamp[index] = query;
+      order_of[index] = order;
+      const auto [begin, end] = star_[index];  // gathered by GatherStarFacets
+      for (uint32_t i = begin; i < end; ++i) {
+        const StarFacet& f = facets_[i];
+        if (first_in_s(f[0], order) && first_in_s(f[1], order) && first_in_s(f[2], order) &&
+            first_in_s(f[3], order)) {
+          consider({f[0], f[1], f[2]});
+        }
+      }
+    };
+    uint32_t order = 0;
+    consider_star(local.index, order++);
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) consider_star(ring_[i], order++);
   }
-  std::sort(candidates_.begin(), candidates_.end(), [](const Facet& a, const Facet& b) {
-    return a[0] != b[0] ? a[0] < b[0] : a[1] != b[1] ? a[1] < b[1] : a[2] < b[2];
-  });
-  candidates_.erase(std::unique(candidates_.begin(), candidates_.end()), candidates_.end());
-  if (candidates_.empty()) return false;
+  if (candidates.empty()) return false;
 
   // The umbrella's triangles: vertices, CGAL points and boxes.
   struct Mine {
@@ -220,6 +289,7 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     Eigen::Vector3d x[3];
     Point p[3];
     Eigen::AlignedBox3d box;
+    PlaneFilter plane;
   };
   thread_local std::vector<Mine> mine;
   mine.clear();
@@ -228,18 +298,22 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
     Mine m{{local.index, tr.a, tr.b},
            {x, out_[tr.a], out_[tr.b]},
            {ToCgal(x), ToCgal(out_[tr.a]), ToCgal(out_[tr.b])},
-           Eigen::AlignedBox3d(x)};
+           Eigen::AlignedBox3d(x),
+           PlaneFilter()};
     m.box.extend(out_[tr.a]);
     m.box.extend(out_[tr.b]);
+    if (!reference) m.plane = PlaneFilter(m.x[0], m.x[1], m.x[2]);
     mine.push_back(m);
   }
-  for (const Facet& f : candidates_) {
+  for (const Facet& f : candidates) {
     const Eigen::Vector3d e[3] = {out_[f[0]], out_[f[1]], out_[f[2]]};
     Eigen::AlignedBox3d box(e[0]);
     box.extend(e[1]);
     box.extend(e[2]);
     const Point q[3] = {ToCgal(e[0]), ToCgal(e[1]), ToCgal(e[2])};
     const Kernel::Triangle_3 other_triangle(q[0], q[1], q[2]);
+    PlaneFilter other_plane;
+    bool other_plane_made = false;
     for (const Mine& m : mine) {
       // Closed triangles that meet have meeting boxes (the same doubles): exact to skip.
       if (!reference && !m.box.intersects(box)) continue;
@@ -253,18 +327,16 @@ bool SurfaceSmoother::MeetsNearby(const DelaunayMesh::Impl& t, const Local& loca
       if (!reference) {
         // Filter in doubles before the exact tests: a triangle or an edge certainly on one side
         // of the other triangle's plane misses it.
-        const Eigen::Vector3d& m0 = m.x[0];
-        const Eigen::Vector3d& m1 = m.x[1];
-        const Eigen::Vector3d& m2 = m.x[2];
+        if (!other_plane_made) {
+          other_plane = PlaneFilter(e[0], e[1], e[2]);
+          other_plane_made = true;
+        }
         if (shared == 0) {
-          if (CertainlyAside(m0, m1, m2, {e[0], e[1], e[2]}) ||
-              CertainlyAside(e[0], e[1], e[2], {m0, m1, m2})) {
+          if (m.plane.Aside({e[0], e[1], e[2]}) || other_plane.Aside({m.x[0], m.x[1], m.x[2]})) {
             continue;
           }
-        } else if (CertainlyAside(m0, m1, m2,
-                                  {e[(shared_other + 1) % 3], e[(shared_other + 2) % 3]}) &&
-                   CertainlyAside(e[0], e[1], e[2],
-                                  {m.x[(shared_mine + 1) % 3], m.x[(shared_mine + 2) % 3]})) {
+        } else if (m.plane.Aside({e[(shared_other + 1) % 3], e[(shared_other + 2) % 3]}) &&
+                   other_plane.Aside({m.x[(shared_mine + 1) % 3], m.x[(shared_mine + 2) % 3]})) {
           continue;
         }
       }
@@ -310,6 +382,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   triangles_.clear();
   ring_.clear();
   facets_.clear();
+  star_cells_.clear();
   const double radius2 = radius * radius;
   auto in_ball = [&](VertexHandle v) {
     return (ToEigen(v->point()) - centre).squaredNorm() < radius2;
@@ -350,10 +423,14 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
     locals_.push_back(local);
   };
   std::vector<UmbrellaTriangle> umbrella;
+  auto umbrella_of = [&](VertexHandle v) {  // its star kept for StarFacets
+    const auto [begin, end] = Star(t, v->info().index);
+    UmbrellaOf(v, star_cells_.data() + begin, star_cells_.data() + end, umbrella);
+  };
   auto add = [&](VertexHandle v, bool known) {
     const int index = v->info().index;
     if (in_set(index)) return;
-    if (!known) UmbrellaOf(t.tri, v, umbrella);
+    if (!known) umbrella_of(v);
     slot_stamp_[index] = call_;
     slot_[index] = static_cast<int>(locals_.size());
     make_local(v, umbrella, false);
@@ -363,7 +440,7 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   std::vector<int> changed;                   // slots of the vertices whose umbrella changed
   for (const VertexHandle& v : vertices) {
     const int index = v->info().index;
-    UmbrellaOf(t.tri, v, umbrella);
+    umbrella_of(v);
     if (umbrella.empty()) {
       out_[index] = ToEigen(v->point());
       moved_[index] = 0;
@@ -489,22 +566,74 @@ SmoothingResult SurfaceSmoother::UpdateVertices(const DelaunayMesh::Impl& t,
   for (const VertexHandle& v : changed_outside) {
     // Outside the ball a vertex keeps its position, unless its new umbrella meets something
     // there (then it goes back to its own point, like a vertex new to δO).
-    UmbrellaOf(t.tri, v, umbrella);
+    umbrella_of(v);
     make_local(v, umbrella, /*ring_of_a_only=*/true);
     const Local& local = locals_.back();
-    if (!valid(local, out_[local.index]) || MeetsNearby(t, local, options.reference_checks)) {
+    if (!options.reference_checks) GatherStarFacets(t, local);
+    if (!valid(local, out_[local.index]) ||
+        MeetsNearby(t, local, options.reference_checks, candidates_)) {
       out_[local.index] = local.own;
       moved_[local.index] = 0;
       ++result.rejected;
     }
   }
+  // The first check of every vertex in work reads the positions as they are now: those checks
+  // run in parallel first (the δO facets around the vertices gathered before, the only part
+  // that writes), and the sequential pass below takes a vertex's result from there when no
+  // position it reads has changed since. A check of k reads the positions of k, of its ring and
+  // of the δO facets around them, all vertices of T adjacent to k or to its ring: a revert of j
+  // marks j and its neighbours in T (dirty_stamp_), and k's first result stands while neither k
+  // nor a vertex of its ring is marked. Same outcome as checking each vertex when popped.
+  const bool prechecked = !options.reference_checks && work.size() >= 2;
+  if (prechecked) {
+    for (int k : work) GatherStarFacets(t, locals_[k]);
+    first_check_.assign(num_set, 0);  // 0: none, 1: misses, 2: meets
+    result.prechecked = work.size();
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, work.size(), 32),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                        thread_local std::vector<Facet> candidates;
+                        for (size_t i = range.begin(); i != range.end(); ++i) {
+                          const Local& local = locals_[work[i]];
+                          first_check_[work[i]] = MeetsNearby(t, local, false, candidates) ? 2 : 1;
+                        }
+                      });
+  }
+  auto dirty = [&](int index) { return dirty_stamp_[index] == call_; };
+  auto first_check_stands = [&](const Local& local) {
+    if (dirty(local.index)) return false;
+    for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) {
+      if (dirty(ring_[i])) return false;
+    }
+    return true;
+  };
+  std::vector<VertexHandle> neighbours;
   while (!work.empty()) {
     const int k = work.back();
     work.pop_back();
     Local& local = locals_[k];
-    if (local.reverts >= 2 || !MeetsNearby(t, local, options.reference_checks)) continue;
+    if (local.reverts >= 2) continue;
+    bool meets;
+    if (prechecked && first_check_[k] != 0) {
+      if (first_check_stands(local)) {
+        meets = first_check_[k] == 2;
+      } else {
+        meets = MeetsNearby(t, local, false, candidates_);
+        ++result.rechecked;
+      }
+      first_check_[k] = 0;
+    } else {
+      if (!options.reference_checks) GatherStarFacets(t, local);
+      meets = MeetsNearby(t, local, options.reference_checks, candidates_);
+    }
+    if (!meets) continue;
     ++result.rejected;
     out_[local.index] = ++local.reverts == 1 ? local.previous : local.own;
+    if (prechecked) {
+      dirty_stamp_[local.index] = call_;
+      neighbours.clear();
+      t.tri.finite_adjacent_vertices(local.v, std::back_inserter(neighbours));
+      for (const VertexHandle& w : neighbours) dirty_stamp_[w->info().index] = call_;
+    }
     work.push_back(k);
     for (uint32_t i = local.ring_begin; i < local.ring_end; ++i) {
       if (in_set(ring_[i])) work.push_back(slot_[ring_[i]]);

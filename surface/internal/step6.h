@@ -33,6 +33,9 @@ GenusRefinementResult RefineGenus(DelaunayMesh::Impl& t, const std::vector<CellH
 struct SmoothingResult {
   size_t vertices = 0;  // δO vertices recomputed
   size_t rejected = 0;  // moves rejected (flip, degenerate or local intersection)
+  // Intersection checks run in parallel first, and those of them taken again because a vertex
+  // they read was sent back meanwhile (0 with SmoothingOptions::reference_checks).
+  size_t prechecked = 0, rechecked = 0;
 };
 
 // The smoothed positions of the δO vertices, kept beside T (whose vertices never move).
@@ -69,13 +72,23 @@ class SurfaceSmoother {
     int reverts = 0;
   };
   using Facet = std::array<int, 3>;  // a δO triangle by vertex index
+  // A δO triangle by vertex index, then the fourth vertex of its cell of O.
+  using StarFacet = std::array<int, 4>;
 
   void Grow(const DelaunayMesh::Impl& t);
+  // The cells around vertex `index` (a range of star_cells_), gathered once per call.
+  std::pair<uint32_t, uint32_t> Star(const DelaunayMesh::Impl& t, int index);
   // The δO facets of the cells of O around vertex `index`, gathered once per call.
   std::pair<uint32_t, uint32_t> StarFacets(const DelaunayMesh::Impl& t, int index);
+  // StarFacets of the vertex of `local` and of its ring (before MeetsNearby, which only reads
+  // them, so that checks may run in parallel).
+  void GatherStarFacets(const DelaunayMesh::Impl& t, const Local& local);
   // Whether the umbrella of `local` at the current positions meets a δO triangle of the cells
-  // of O around the vertex or its ring (the vertex's triangles against the others).
-  bool MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference);
+  // of O around the vertex or its ring (the vertex's triangles against the others). Without
+  // `reference`, the facets around them must have been gathered (GatherStarFacets); then it
+  // writes only `candidates` (scratch) and may run in parallel.
+  bool MeetsNearby(const DelaunayMesh::Impl& t, const Local& local, bool reference,
+                   std::vector<Facet>& candidates) const;
 
   // By vertex index: the output position (its point when not smoothed), whether it differs
   // from the point, and the hash of the δO umbrella (when has_umbrella_).
@@ -87,12 +100,22 @@ class SurfaceSmoother {
   // the vertices met (star_ by vertex index, valid when star_stamp_ equals call_).
   uint32_t call_ = 0;
   std::vector<uint32_t> slot_stamp_, star_stamp_;
+  // By vertex index: equal to call_ when a revert in this call moved the vertex or a neighbour
+  // in T (a first check of a vertex is then taken again, see UpdateVertices).
+  std::vector<uint32_t> dirty_stamp_;
+  // The stars of Star: star_cells_range_ by vertex index, valid when star_cells_stamp_ equals
+  // call_.
+  std::vector<CellHandle> star_cells_;
+  std::vector<std::pair<uint32_t, uint32_t>> star_cells_range_;
+  std::vector<uint32_t> star_cells_stamp_;
+  std::vector<uint8_t> first_check_;  // by slot: the parallel first check (0 none, 1, 2 meets)
   std::vector<int> slot_;
   std::vector<std::pair<uint32_t, uint32_t>> star_;
   std::vector<Local> locals_;
   std::vector<Triangle> triangles_;
   std::vector<int> ring_;
-  std::vector<Facet> facets_, candidates_;
+  std::vector<StarFacet> facets_;
+  std::vector<Facet> candidates_;
 };
 
 }  // namespace omni::internal

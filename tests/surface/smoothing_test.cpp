@@ -198,11 +198,12 @@ TEST(Smoothing, MovesNoVertexOutsideTheKeyframeBall) {
 
 // The fast local intersection checks (δO triangles around each vertex gathered once per keyframe,
 // a box filter per triangle pair) against the reference (gathered anew for every check, no
-// filter): after every keyframe, the same smoothed position for every vertex and the same
-// counts; and after every keyframe no two triangles of the smoothed surface intersect (brute
-// force over all pairs whose boxes meet). (Flips are checked at the end of the runs above: a
-// vertex sent back to its previous position by the intersection checks is not flip-checked, and
-// a triangle can stay turned for some keyframes.)
+// filter; the fast path also runs the first check of every moved vertex in parallel and keeps
+// its result while no position it reads was reverted): after every keyframe, the same smoothed
+// position for every vertex and the same counts; and after every keyframe no two triangles of the
+// smoothed surface intersect (brute force over all pairs whose boxes meet). (Flips are checked at
+// the end of the runs above: a vertex sent back to its previous position by the intersection checks
+// is not flip-checked, and a triangle can stay turned for some keyframes.)
 void ExpectFastChecksMatchReference(const std::vector<SurfaceKeyframe>& drive, double radius) {
   SculptorOptions fast;
   fast.scale = 1.0;
@@ -211,14 +212,18 @@ void ExpectFastChecksMatchReference(const std::vector<SurfaceKeyframe>& drive, d
   SculptorOptions reference = fast;
   reference.smoothing.reference_checks = true;
   IncrementalSculptor a(fast), b(reference);
-  size_t keyframes = 0, moved = 0, rejected = 0;
+  size_t keyframes = 0, moved = 0, rejected = 0, prechecked = 0, rechecked = 0;
   for (const SurfaceKeyframe& kf : drive) {
     const std::vector<KeyframeStats> sa = a.AddKeyframe(kf), sb = b.AddKeyframe(kf);
     ASSERT_EQ(sa.size(), sb.size());
     for (size_t i = 0; i < sa.size(); ++i) {
       EXPECT_EQ(sa[i].smoothed_vertices, sb[i].smoothed_vertices);
       EXPECT_EQ(sa[i].smoothing_rejected, sb[i].smoothing_rejected);
+      EXPECT_EQ(sb[i].smoothing_prechecked, 0u);  // the reference checks one by one
+      EXPECT_LE(sa[i].smoothing_rechecked, sa[i].smoothing_prechecked);
       rejected += sa[i].smoothing_rejected;
+      prechecked += sa[i].smoothing_prechecked;
+      rechecked += sa[i].smoothing_rechecked;
     }
     if (sa.empty()) continue;
     ++keyframes;
@@ -242,8 +247,10 @@ void ExpectFastChecksMatchReference(const std::vector<SurfaceKeyframe>& drive, d
     if (::testing::Test::HasFailure()) return;
   }
   EXPECT_GT(keyframes, 5u);
-  EXPECT_GT(moved, 1000u);  // the comparison is not vacuous
-  EXPECT_GT(rejected, 0u);  // nor are the intersection checks
+  EXPECT_GT(moved, 1000u);    // the comparison is not vacuous
+  EXPECT_GT(rejected, 0u);    // nor are the intersection checks
+  EXPECT_GT(prechecked, 0u);  // nor the parallel first checks
+  EXPECT_GT(rechecked, 0u);   // nor the rule that takes a first check again after a revert
 }
 
 TEST(Smoothing, FastChecksMatchTheReferenceOnANoisyStreet) {

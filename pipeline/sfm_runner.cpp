@@ -39,6 +39,8 @@ std::string SfmRunnerOptions::Check() const {
   if (max_frames < 0) return "max_frames: expected 0 (all) or more";
   if (!(usable_tracked_frames_share >= 0.0 && usable_tracked_frames_share <= 1.0))
     return "usable_tracked_frames_share: expected a share in [0, 1]";
+  if (!(final_bundle_adjustment_merge_angle >= 0.0 && final_bundle_adjustment_merge_angle < 0.1))
+    return "final_bundle_adjustment_merge_angle: expected 0 (none) or an angle below 0.1 rad";
   return {};
 }
 
@@ -126,8 +128,8 @@ struct SfmRunner::Impl {
   // `scale` (the change of the map's scale since the row was tracked); the offset from the
   // reference is kept at that scale too, so that both describe the frame in one state of the map.
   void SetNextReference(SfmFrameRow* row, int keyframe, double scale = 1.0) const {
-    if (!options.frame_poses_between_keyframes || !row->result.tracked ||
-        row->result.keyframe || row->reference_keyframe < 0 || row->next_keyframe >= 0 ||
+    if (!options.frame_poses_between_keyframes || !row->result.tracked || row->result.keyframe ||
+        row->reference_keyframe < 0 || row->next_keyframe >= 0 ||
         keyframe <= row->reference_keyframe || keyframe >= tracker.NumKeyframes())
       return;
     row->keyframe_from_rig.translation *= scale;
@@ -337,7 +339,10 @@ SfmRunResult SfmRunner::Finish() {
   SfmRunResult& result = s.result;
   if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {
     const auto ba_start = Clock::now();
-    const BundleAdjustmentSummary summary = s.tracker.GlobalBundleAdjust();
+    int points_merged = 0;
+    const BundleAdjustmentSummary summary =
+        s.tracker.GlobalBundleAdjust(s.options.final_bundle_adjustment_true_offsets,
+                                     s.options.final_bundle_adjustment_merge_angle, &points_merged);
     result.final_bundle_adjustment_seconds = SecondsSince(ba_start);
     if (summary.success) {
       result.final_rms_angle_before = summary.rms_angle_before;
@@ -345,9 +350,13 @@ SfmRunResult SfmRunner::Finish() {
       s.HandOverCorrectedMap();
       spdlog::info(
           "sfm: final bundle adjustment of {} keyframes in {:.2f} s: RMS angle {:.4f} -> "
-          "{:.4f} degrees",
+          "{:.4f} degrees, {} iterations, {} outliers, {} points fused; camera offsets {}",
           result.keyframes.size(), result.final_bundle_adjustment_seconds,
-          summary.rms_angle_before * 180.0 / M_PI, summary.rms_angle_after * 180.0 / M_PI);
+          summary.rms_angle_before * 180.0 / M_PI, summary.rms_angle_after * 180.0 / M_PI,
+          summary.num_iterations, summary.removed_observations.size(), points_merged,
+          s.options.tracker.central && s.options.final_bundle_adjustment_true_offsets
+              ? fmt::format("true, {:.3f} map units per metre", summary.offset_scale)
+              : std::string(s.options.tracker.central ? "none (central)" : "true, metric"));
     } else {
       spdlog::warn("sfm: the final bundle adjustment failed; the map is kept as it was");
     }
@@ -440,9 +449,9 @@ std::vector<SfmFramePose> TrackedFramePoses(const SfmRunResult& run) {
       const Rigid3d from_reference = world_from_reference * row.keyframe_from_rig;
       const Rigid3d from_next = world_from_next * row.next_keyframe_from_rig;
       const double w = row.next_keyframe_weight;
-      poses.push_back({row.frame, Rigid3d(from_reference.rotation.slerp(w, from_next.rotation),
-                                          (1.0 - w) * from_reference.translation +
-                                              w * from_next.translation)});
+      poses.push_back(
+          {row.frame, Rigid3d(from_reference.rotation.slerp(w, from_next.rotation),
+                              (1.0 - w) * from_reference.translation + w * from_next.translation)});
     } else if (final_pose(k, &world_from_reference))
       poses.push_back({row.frame, world_from_reference * row.keyframe_from_rig});
     else

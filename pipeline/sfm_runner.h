@@ -37,6 +37,12 @@ struct SfmRunnerOptions {
   // keyframes fixed), and the corrected map handed over again (map_corrected), as after a loop
   // closure.
   bool final_bundle_adjustment = true;
+  // Central mode: the final adjustment uses the cameras' true offsets at a scale it estimates
+  // (Tracker::GlobalBundleAdjust), not the central approximation of the rest of the run.
+  bool final_bundle_adjustment_true_offsets = true;
+  // Before the final adjustment, the points that are one place seen by two tracks are fused
+  // (Tracker::GlobalBundleAdjust; radians, 0: none).
+  double final_bundle_adjustment_merge_angle = 0.0;
   // A frame the motion model does not track is matched again by descriptors against the last
   // keyframes, newest first (TrackBuilderOptions::rematch_keyframes of them), and retried.
   bool descriptor_retry = true;

@@ -128,22 +128,26 @@ def main():
         by_frame.setdefault(f, []).append(add(C, scl(1.0 / s, mv(R_wc, cam_from_rig[c][1]))))
     colmap = {f: scl(1.0 / len(v), [sum(p[i] for p in v) for i in range(3)])
               for f, v in by_frame.items()}
-    tracks = [read_tum(p, rate) for p in ours]
-    common = sorted(f for f in colmap if all(f in t for t in tracks))
     print(f'drive {drive}: {len(frames)} frames, length {length:.2f} m')
     print(f'colmap: {len(images)} images of {len(by_frame)} frames registered; camera-centre RMS '
           f'{100 * cam_rms:.2f} cm over its images')
-    print(f'common frames: {len(common)} ({common[0]}..{common[-1]})' if common else 'no common frame')
-    if len(common) < 3: return
-    g = [gt[f][1] for f in common]
-    rms, _ = ate([colmap[f] for f in common], g)
-    print(f'colmap: ATE {100 * rms:.2f} cm, {100 * rms / length:.4f} % of the length')
-    for p, t in zip(ours, tracks):
-        rms, _ = ate([t[f][1] for f in common], g)
-        all_rms, _ = ate([t[f][1] for f in sorted(t) if f in gt], [gt[f][1] for f in sorted(t) if f in gt])
-        print(f'{p}: {len(t)} frames posed; ATE on the common frames {100 * rms:.2f} cm, '
-              f'{100 * rms / length:.4f} % of the length; on all its frames {100 * all_rms:.2f} cm')
-
+    if len(by_frame) >= 3:
+        fs = sorted(by_frame)
+        rms, _ = ate([colmap[f] for f in fs], [gt[f][1] for f in fs])
+        print(f'colmap: ATE on its {len(fs)} frames {100 * rms:.2f} cm, '
+              f'{100 * rms / length:.4f} % of the length')
+    for p in ours:
+        t = read_tum(p, rate)
+        common = sorted(f for f in colmap if f in t)
+        if len(common) < 3:
+            print(f'{p}: {len(t)} frames posed, {len(common)} in common'); continue
+        g = [gt[f][1] for f in common]
+        ours_rms, _ = ate([t[f][1] for f in common], g)
+        colmap_rms, _ = ate([colmap[f] for f in common], g)
+        print(f'{p}: {len(t)} frames posed, {len(common)} common with colmap: ATE ours '
+              f'{100 * ours_rms:.2f} cm ({100 * ours_rms / length:.4f} %), colmap '
+              f'{100 * colmap_rms:.2f} cm ({100 * colmap_rms / length:.4f} %), ratio '
+              f'{ours_rms / max(colmap_rms, 1e-12):.2f}')
 
 if __name__ == '__main__':
     main()

@@ -48,9 +48,9 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                     "After a loop closure, correct with the pose graph only");
   command->add_flag("!--no-final-ba", o->sfm.final_bundle_adjustment,
                     "No global bundle adjustment when the drive ends");
-  command->add_flag("!--final-ba-central", o->sfm.final_bundle_adjustment_true_offsets,
-                    "Central mode: the final adjustment keeps the central approximation (default: "
-                    "the cameras' true offsets, their scale estimated)");
+  command->add_flag("--final-ba-true-offsets", o->sfm.final_bundle_adjustment_true_offsets,
+                    "Central mode: the final adjustment with the cameras' true offsets, their "
+                    "scale estimated (default: the central approximation)");
   command
       ->add_option("--final-ba-merge-angle", o->sfm.final_bundle_adjustment_merge_angle,
                    "Before the final adjustment, fuse the points that one point fits within this "

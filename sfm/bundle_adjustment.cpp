@@ -314,6 +314,19 @@ BundleAdjustmentSummary LocalBundleAdjust(const Rig& rig, const BundleAdjustment
   }
   BundleAdjustmentSummary summary;
   summary.offset_scale = EstimatesOffsetScale(options) ? options.offset_scale : 1.0;
+  if (EstimatesOffsetScale(options)) {
+    // The solve starts from the scale that fits the current poses and points best among 33
+    // spaced by factors of 1.33 over the bounds (the cost is not convex in it far away).
+    double best = RmsAngle(rig, options, *problem, summary.offset_scale);
+    for (int i = -16; i <= 16; ++i) {
+      const double scale = options.offset_scale * std::pow(100.0, i / 16.0);
+      const double rms = RmsAngle(rig, options, *problem, scale);
+      if (rms < best) {
+        best = rms;
+        summary.offset_scale = scale;
+      }
+    }
+  }
   summary.rms_angle_before = RmsAngle(rig, options, *problem, summary.offset_scale);
   if (!Solve(rig, options, problem, &summary)) return summary;
 

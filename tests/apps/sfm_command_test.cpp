@@ -189,9 +189,8 @@ TEST_F(SfmCommandShortDrive, NonCentralTracksEveryFrameWithinOnePercent) {
 // the scale settled were up to 2 m off, 0.6 % of the distance (`--no-frames-between-keyframes`).
 TEST_F(SfmCommandShortDrive, NonCentralFramePosesFollowTheirKeyframes) {
   const fs::path out = dir_->path() / "sfm_frames_between_keyframes";
-  const testing::CommandResult result =
-      Run({"--quiet", "sfm", drive_.string(), "--non-central", "--max-frames", "60", "--out",
-           out.string()});
+  const testing::CommandResult result = Run({"--quiet", "sfm", drive_.string(), "--non-central",
+                                             "--max-frames", "60", "--out", out.string()});
   ASSERT_EQ(result.exit_code, 0) << result.err;
   std::vector<StampedPose> gt = ReadTum(drive_ / "gt" / "poses.tum");
   gt.resize(60);

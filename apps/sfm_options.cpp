@@ -58,6 +58,17 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                     "After a loop closure, correct with the pose graph only");
   command->add_flag("!--no-final-ba", o->sfm.final_bundle_adjustment,
                     "No global bundle adjustment when the drive ends");
+  command->add_flag("--final-ba-true-offsets", o->sfm.final_bundle_adjustment_true_offsets,
+                    "Central mode: the final adjustment with the cameras' true offsets, their "
+                    "scale estimated (default: the central approximation)");
+  command
+      ->add_option("--final-ba-merge-angle", o->sfm.final_bundle_adjustment_merge_angle,
+                   "Before the final adjustment, fuse the points that one point fits within this "
+                   "angle (radians; 0: none)")
+      ->capture_default_str();
+  command->add_flag("!--no-frames-between-keyframes", o->sfm.frame_poses_between_keyframes,
+                    "A tracked frame follows only the keyframe it was tracked from (default: "
+                    "both keyframes around it)");
   command
       ->add_option("--scene-depth", o->scene_depth,
                    "Typical scene depth (m), for the warning on large camera offsets in central "

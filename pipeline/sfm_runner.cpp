@@ -39,6 +39,8 @@ std::string SfmRunnerOptions::Check() const {
   if (max_frames < 0) return "max_frames: expected 0 (all) or more";
   if (!(usable_tracked_frames_share >= 0.0 && usable_tracked_frames_share <= 1.0))
     return "usable_tracked_frames_share: expected a share in [0, 1]";
+  if (!(final_bundle_adjustment_merge_angle >= 0.0 && final_bundle_adjustment_merge_angle < 0.1))
+    return "final_bundle_adjustment_merge_angle: expected 0 (none) or an angle below 0.1 rad";
   return {};
 }
 
@@ -121,6 +123,44 @@ struct SfmRunner::Impl {
     row->reference_keyframe = keyframe;
     row->keyframe_from_rig = tracker.KeyframePose(keyframe).Inverse() * row->result.world_from_rig;
   }
+  // The row's pose relative to keyframe `keyframe`, a keyframe after it, as it is now in the
+  // map: the pose its reference keyframe carries it to, its offset from the reference scaled by
+  // `scale` (the change of the map's scale since the row was tracked); the offset from the
+  // reference is kept at that scale too, so that both describe the frame in one state of the map.
+  void SetNextReference(SfmFrameRow* row, int keyframe, double scale = 1.0) const {
+    if (!options.frame_poses_between_keyframes || !row->result.tracked || row->result.keyframe ||
+        row->reference_keyframe < 0 || row->next_keyframe >= 0 ||
+        keyframe <= row->reference_keyframe || keyframe >= tracker.NumKeyframes())
+      return;
+    row->keyframe_from_rig.translation *= scale;
+    const Rigid3d world_from_rig =
+        tracker.KeyframePose(row->reference_keyframe) * row->keyframe_from_rig;
+    const Rigid3d next_from_rig = tracker.KeyframePose(keyframe).Inverse() * world_from_rig;
+    const double to_reference = row->keyframe_from_rig.translation.norm();
+    const double to_next = next_from_rig.translation.norm();
+    row->next_keyframe = keyframe;
+    row->next_keyframe_from_rig = next_from_rig;
+    row->next_keyframe_weight =
+        to_reference + to_next > 0.0 ? to_reference / (to_reference + to_next) : 0.0;
+  }
+  // A new keyframe: the tracked frames since the previous keyframe row get it as their next.
+  // `scale`: the change of scale of the new keyframe's adjustment (its previous two keyframes'
+  // distance after it over before).
+  void SetNextReferences(int keyframe, double scale) {
+    if (result.frames.empty()) return;
+    for (size_t r = result.frames.size(); r-- > 0;) {
+      SfmFrameRow& row = result.frames[r];
+      if (row.result.keyframe) break;
+      SetNextReference(&row, keyframe, scale);
+    }
+  }
+  // The first keyframe made from a frame after input frame `frame` (-1: none).
+  int KeyframeAfter(size_t frame) const {
+    const std::vector<int> frames = tracker.KeyframeFrames();
+    for (size_t k = 0; k < frames.size(); ++k)
+      if (InputFrame(frames[k]) > static_cast<int>(frame)) return static_cast<int>(k);
+    return -1;
+  }
   // The tracker's second thoughts on earlier frames (see Tracker::TakeRevisedFrames).
   void ApplyRevisions() {
     for (Tracker::RevisedFrame& revision : tracker.TakeRevisedFrames()) {
@@ -132,6 +172,8 @@ struct SfmRunner::Impl {
       row->result = revision.result;
       // Frames resected in a new map: relative to its first keyframe.
       SetReference(&*row, row->result.tracked ? 0 : -1);
+      row->next_keyframe = -1;
+      SetNextReference(&*row, KeyframeAfter(row->frame));
       if (!row->result.tracked)
         spdlog::warn("frame {}: not tracked ({})", row->name, row->result.status);
     }
@@ -206,6 +248,13 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
       const int stereo = s.builder.MatchOverlappingCameras(&tracked);
       spdlog::debug("frame {}: {} matches between overlapping cameras", name, stereo);
     }
+    // The newest two keyframes before the frame: a new keyframe's adjustment may rescale them.
+    const int keyframes_before = tracker.NumKeyframes();
+    double distance_before = 0.0;
+    if (keyframes_before >= 2)
+      distance_before = (tracker.KeyframePose(keyframes_before - 1).translation -
+                         tracker.KeyframePose(keyframes_before - 2).translation)
+                            .norm();
     row.result = tracker.AddFrame(tracked.observations, s.builder.MapPointSearcher());
     if (!row.result.tracked && s.options.descriptor_retry) {
       // Without a map only the first keyframe can help (the last tracked frame).
@@ -233,6 +282,16 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
     s.builder.SetFrameResult(row.result.tracked, row.result.keyframe);
     if (row.result.tracked) {
       s.SetReference(&row, s.tracker.NumKeyframes() - 1);  // the newest keyframe
+      if (row.result.keyframe) {
+        double scale = 1.0;
+        if (distance_before > 0.0 && tracker.NumKeyframes() == keyframes_before + 1) {
+          const double distance_after = (tracker.KeyframePose(keyframes_before - 1).translation -
+                                         tracker.KeyframePose(keyframes_before - 2).translation)
+                                            .norm();
+          if (distance_after > 0.0) scale = distance_after / distance_before;
+        }
+        s.SetNextReferences(tracker.NumKeyframes() - 1, scale);
+      }
     } else if (!tracker.Initialised()) {
       // Held until the map starts: resected then (a warning only if that fails, below).
       spdlog::info("frame {}: not tracked yet ({})", name, row.result.status);
@@ -280,7 +339,10 @@ SfmRunResult SfmRunner::Finish() {
   SfmRunResult& result = s.result;
   if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {
     const auto ba_start = Clock::now();
-    const BundleAdjustmentSummary summary = s.tracker.GlobalBundleAdjust();
+    int points_merged = 0;
+    const BundleAdjustmentSummary summary =
+        s.tracker.GlobalBundleAdjust(s.options.final_bundle_adjustment_true_offsets,
+                                     s.options.final_bundle_adjustment_merge_angle, &points_merged);
     result.final_bundle_adjustment_seconds = SecondsSince(ba_start);
     if (summary.success) {
       result.final_rms_angle_before = summary.rms_angle_before;
@@ -288,9 +350,13 @@ SfmRunResult SfmRunner::Finish() {
       s.HandOverCorrectedMap();
       spdlog::info(
           "sfm: final bundle adjustment of {} keyframes in {:.2f} s: RMS angle {:.4f} -> "
-          "{:.4f} degrees",
+          "{:.4f} degrees, {} iterations, {} outliers, {} points fused; camera offsets {}",
           result.keyframes.size(), result.final_bundle_adjustment_seconds,
-          summary.rms_angle_before * 180.0 / M_PI, summary.rms_angle_after * 180.0 / M_PI);
+          summary.rms_angle_before * 180.0 / M_PI, summary.rms_angle_after * 180.0 / M_PI,
+          summary.num_iterations, summary.removed_observations.size(), points_merged,
+          s.options.tracker.central && s.options.final_bundle_adjustment_true_offsets
+              ? fmt::format("true, {:.3f} map units per metre", summary.offset_scale)
+              : std::string(s.options.tracker.central ? "none (central)" : "true, metric"));
     } else {
       spdlog::warn("sfm: the final bundle adjustment failed; the map is kept as it was");
     }
@@ -371,8 +437,23 @@ std::vector<SfmFramePose> TrackedFramePoses(const SfmRunResult& run) {
   for (const SfmFrameRow& row : run.frames) {
     if (!row.result.tracked) continue;
     const int k = row.reference_keyframe;
-    if (k >= 0 && static_cast<size_t>(k) < run.keyframes.size() && run.keyframes[k].keyframe == k)
-      poses.push_back({row.frame, run.keyframes[k].world_from_rig * row.keyframe_from_rig});
+    const auto final_pose = [&run](int keyframe, Rigid3d* world_from_keyframe) {
+      if (keyframe < 0 || static_cast<size_t>(keyframe) >= run.keyframes.size() ||
+          run.keyframes[keyframe].keyframe != keyframe)
+        return false;
+      *world_from_keyframe = run.keyframes[keyframe].world_from_rig;
+      return true;
+    };
+    Rigid3d world_from_reference, world_from_next;
+    if (final_pose(k, &world_from_reference) && final_pose(row.next_keyframe, &world_from_next)) {
+      const Rigid3d from_reference = world_from_reference * row.keyframe_from_rig;
+      const Rigid3d from_next = world_from_next * row.next_keyframe_from_rig;
+      const double w = row.next_keyframe_weight;
+      poses.push_back(
+          {row.frame, Rigid3d(from_reference.rotation.slerp(w, from_next.rotation),
+                              (1.0 - w) * from_reference.translation + w * from_next.translation)});
+    } else if (final_pose(k, &world_from_reference))
+      poses.push_back({row.frame, world_from_reference * row.keyframe_from_rig});
     else
       poses.push_back({row.frame, row.result.world_from_rig});
   }

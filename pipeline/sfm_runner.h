@@ -37,6 +37,14 @@ struct SfmRunnerOptions {
   // keyframes fixed), and the corrected map handed over again (map_corrected), as after a loop
   // closure.
   bool final_bundle_adjustment = true;
+  // Central mode: the final adjustment uses the cameras' true offsets at a scale it estimates
+  // (Tracker::GlobalBundleAdjust), not the central approximation of the rest of the run. Off:
+  // on the tiny and short drives it took the keyframes' ATE 13 % and 4 % lower but made the
+  // final adjustment 4 times slower, 15 to 20 % of the run (docs/figures.md F33).
+  bool final_bundle_adjustment_true_offsets = false;
+  // Before the final adjustment, the points that are one place seen by two tracks are fused
+  // (Tracker::GlobalBundleAdjust; radians, 0: none).
+  double final_bundle_adjustment_merge_angle = 0.0;
   // A frame the motion model does not track is matched again by descriptors against the last
   // keyframes, newest first (TrackBuilderOptions::rematch_keyframes of them), and retried.
   bool descriptor_retry = true;
@@ -52,6 +60,12 @@ struct SfmRunnerOptions {
   // A run is usable when the SfM initialised and at least this share of the frames read was
   // tracked; below it the map covers too little of the drive (tracking was lost for good).
   double usable_tracked_frames_share = 0.5;
+  // A tracked frame between two keyframes follows both when the keyframes are corrected (local
+  // adjustments, loop closures, the final adjustment): its pose relative to each, blended by
+  // where it lies between them (TrackedFramePoses). Off: it follows the keyframe it was tracked
+  // from alone, which carries it rigidly, so a change of the map's scale after it was tracked
+  // (non-central mode, where the offsets set the scale) moves it off its keyframes.
+  bool frame_poses_between_keyframes = true;
 
   // "" or the first bad field ("tracker.keyframes.min_tracked_share: expected ...").
   std::string Check() const;
@@ -71,10 +85,18 @@ struct SfmFrameRow {
   // correction of the keyframes (loop closure, final adjustment) carries the frame along.
   int reference_keyframe = -1;
   Rigid3d keyframe_from_rig;
+  // The first keyframe after the frame (-1: none yet), the frame's pose relative to it when it
+  // was made, and the frame's place between the two: 0 at the reference, 1 at this one (its
+  // distances to both then).
+  int next_keyframe = -1;
+  Rigid3d next_keyframe_from_rig;
+  double next_keyframe_weight = 0.0;
 };
 
 // world_from_rig of every tracked frame: its reference keyframe's final pose times the
-// relative pose it was tracked with (for poses.tum of every frame).
+// relative pose it was tracked with, blended with the pose relative to the next keyframe when
+// the row has one (positions linearly, rotations by slerp, by next_keyframe_weight), so that the
+// frame follows a change of scale between its keyframes (for frame_poses.tum).
 struct SfmFramePose {
   size_t frame = 0;
   Rigid3d world_from_rig;

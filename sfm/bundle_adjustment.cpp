@@ -31,12 +31,12 @@ Eigen::Vector3d CentralCenter(const Rig& rig) {
 
 ObservationFrame MakeObservationFrame(const Rig& rig, BundleAdjustmentOptions::Mode mode,
                                       const Eigen::Vector3d& central_center, int camera,
-                                      const Eigen::Vector3d& bearing) {
+                                      const Eigen::Vector3d& bearing, double offset_scale = 1.0) {
   const Rigid3d& cam_from_rig = rig.cameras[camera].cam_from_rig;
   ObservationFrame frame;
   if (mode == BundleAdjustmentOptions::Mode::kNonCentral) {
     frame.frame_from_rig_rotation = cam_from_rig.rotation.toRotationMatrix();
-    frame.frame_from_rig_translation = cam_from_rig.translation;
+    frame.frame_from_rig_translation = offset_scale * cam_from_rig.translation;
     frame.bearing = bearing.normalized();
   } else {
     frame.frame_from_rig_rotation.setIdentity();
@@ -97,6 +97,52 @@ class AngularResidual {
   Eigen::Vector3d tangent_v_;
 };
 
+// As AngularResidual, the frame_from_rig translation (a camera's offset, in metres) times a
+// scale that is a parameter: x_frame = R_fr x_rig + s t_fr.
+class ScaledOffsetAngularResidual {
+ public:
+  explicit ScaledOffsetAngularResidual(const ObservationFrame& frame)
+      : frame_from_rig_rotation_(frame.frame_from_rig_rotation),
+        frame_from_rig_translation_(frame.frame_from_rig_translation),
+        bearing_(frame.bearing) {
+    tangent_u_ = bearing_.unitOrthogonal();
+    tangent_v_ = bearing_.cross(tangent_u_);
+  }
+
+  template <typename T>
+  bool operator()(const T* world_from_rig_q, const T* world_from_rig_t, const T* point,
+                  const T* offset_scale, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> q(world_from_rig_q);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> t(world_from_rig_t);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> x(point);
+    const Eigen::Matrix<T, 3, 1> x_rig = q.conjugate() * (x - t);
+    const Eigen::Matrix<T, 3, 1> x_frame = frame_from_rig_rotation_.cast<T>() * x_rig +
+                                           offset_scale[0] * frame_from_rig_translation_.cast<T>();
+    const Eigen::Matrix<T, 3, 1> p = x_frame / x_frame.norm();
+    const T denominator = T(1.0) + bearing_.cast<T>().dot(p);
+    residual[0] = T(2.0) * tangent_u_.cast<T>().dot(p) / denominator;
+    residual[1] = T(2.0) * tangent_v_.cast<T>().dot(p) / denominator;
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const ObservationFrame& frame) {
+    return new ceres::AutoDiffCostFunction<ScaledOffsetAngularResidual, 2, 4, 3, 3, 1>(
+        new ScaledOffsetAngularResidual(frame));
+  }
+
+ private:
+  Eigen::Matrix3d frame_from_rig_rotation_;
+  Eigen::Vector3d frame_from_rig_translation_;
+  Eigen::Vector3d bearing_;
+  Eigen::Vector3d tangent_u_;
+  Eigen::Vector3d tangent_v_;
+};
+
+bool EstimatesOffsetScale(const BundleAdjustmentOptions& options) {
+  return options.estimate_offset_scale &&
+         options.mode == BundleAdjustmentOptions::Mode::kNonCentral;
+}
+
 ceres::LossFunction* MakeLoss(const BundleAdjustmentOptions& options) {
   switch (options.loss) {
     case BundleAdjustmentOptions::Loss::kTrivial:
@@ -120,13 +166,13 @@ double AngleOf(const ObservationFrame& frame, const Rigid3d& world_from_rig,
 }
 
 double RmsAngle(const Rig& rig, const BundleAdjustmentOptions& options,
-                const BundleAdjustmentProblem& problem) {
+                const BundleAdjustmentProblem& problem, double offset_scale) {
   if (problem.observations.empty()) return 0.0;
   const Eigen::Vector3d center = CentralCenter(rig);
   double sum = 0.0;
   for (const BundleAdjustmentObservation& observation : problem.observations) {
-    const ObservationFrame frame =
-        MakeObservationFrame(rig, options.mode, center, observation.camera, observation.bearing);
+    const ObservationFrame frame = MakeObservationFrame(
+        rig, options.mode, center, observation.camera, observation.bearing, offset_scale);
     const double angle = AngleOf(frame, problem.keyframes[observation.keyframe].world_from_rig,
                                  problem.points_in_world[observation.point]);
     sum += angle * angle;
@@ -152,19 +198,32 @@ bool Solve(const Rig& rig, const BundleAdjustmentOptions& options, BundleAdjustm
   const Eigen::Vector3d center = CentralCenter(rig);
   std::vector<char> keyframe_used(problem->keyframes.size(), 0);
   std::vector<char> point_used(problem->points_in_world.size(), 0);
+  const bool scaled = EstimatesOffsetScale(options);
+  double offset_scale = summary->offset_scale;
   for (const BundleAdjustmentObservation& observation : problem->observations) {
     const ObservationFrame frame =
         MakeObservationFrame(rig, options.mode, center, observation.camera, observation.bearing);
-    ceres_problem.AddResidualBlock(AngularResidual::Create(frame), MakeLoss(options),
-                                   rotations[observation.keyframe].data(),
-                                   translations[observation.keyframe].data(),
-                                   problem->points_in_world[observation.point].data());
+    if (scaled)
+      ceres_problem.AddResidualBlock(
+          ScaledOffsetAngularResidual::Create(frame), MakeLoss(options),
+          rotations[observation.keyframe].data(), translations[observation.keyframe].data(),
+          problem->points_in_world[observation.point].data(), &offset_scale);
+    else
+      ceres_problem.AddResidualBlock(AngularResidual::Create(frame), MakeLoss(options),
+                                     rotations[observation.keyframe].data(),
+                                     translations[observation.keyframe].data(),
+                                     problem->points_in_world[observation.point].data());
     keyframe_used[observation.keyframe] = 1;
     point_used[observation.point] = 1;
   }
   if (ceres_problem.NumResidualBlocks() == 0) return false;
 
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+  if (scaled) {
+    ceres_problem.SetParameterLowerBound(&offset_scale, 0, options.offset_scale / 100.0);
+    ceres_problem.SetParameterUpperBound(&offset_scale, 0, options.offset_scale * 100.0);
+    ordering->AddElementToGroup(&offset_scale, 1);
+  }
   for (size_t i = 0; i < problem->keyframes.size(); ++i) {
     if (!keyframe_used[i]) continue;
     ceres_problem.SetManifold(rotations[i].data(), new ceres::EigenQuaternionManifold);
@@ -200,6 +259,7 @@ bool Solve(const Rig& rig, const BundleAdjustmentOptions& options, BundleAdjustm
   if (summary->initial_cost == 0.0) summary->initial_cost = ceres_summary.initial_cost;
   summary->final_cost = ceres_summary.final_cost;
   if (!ceres_summary.IsSolutionUsable()) return false;
+  if (scaled) summary->offset_scale = offset_scale;
   for (size_t i = 0; i < problem->keyframes.size(); ++i) {
     if (problem->keyframes[i].fixed || !keyframe_used[i]) continue;
     problem->keyframes[i].world_from_rig =
@@ -216,6 +276,8 @@ std::string BundleAdjustmentOptions::Check() const {
   if (!(function_tolerance > 0.0)) return "function_tolerance: expected a positive value";
   if (num_threads < 1) return "num_threads: expected at least 1";
   if (!(max_outlier_angle > 0.0)) return "max_outlier_angle: expected a positive angle (radians)";
+  if (!(offset_scale > 0.0) || !std::isfinite(offset_scale))
+    return "offset_scale: expected a positive finite scale";
   return {};
 }
 
@@ -225,6 +287,7 @@ std::string BundleAdjustmentSummary::BriefReport() const {
       << " iterations, cost " << initial_cost << " -> " << final_cost << ", rms angle "
       << rms_angle_before << " -> " << rms_angle_after << " rad, " << removed_observations.size()
       << " outliers removed";
+  if (offset_scale != 1.0) out << ", offset scale " << offset_scale;
   return out.str();
 }
 
@@ -250,7 +313,21 @@ BundleAdjustmentSummary LocalBundleAdjust(const Rig& rig, const BundleAdjustment
            observation.point < static_cast<int>(problem->points_in_world.size()));
   }
   BundleAdjustmentSummary summary;
-  summary.rms_angle_before = RmsAngle(rig, options, *problem);
+  summary.offset_scale = EstimatesOffsetScale(options) ? options.offset_scale : 1.0;
+  if (EstimatesOffsetScale(options)) {
+    // The solve starts from the scale that fits the current poses and points best among 33
+    // spaced by factors of 1.33 over the bounds (the cost is not convex in it far away).
+    double best = RmsAngle(rig, options, *problem, summary.offset_scale);
+    for (int i = -16; i <= 16; ++i) {
+      const double scale = options.offset_scale * std::pow(100.0, i / 16.0);
+      const double rms = RmsAngle(rig, options, *problem, scale);
+      if (rms < best) {
+        best = rms;
+        summary.offset_scale = scale;
+      }
+    }
+  }
+  summary.rms_angle_before = RmsAngle(rig, options, *problem, summary.offset_scale);
   if (!Solve(rig, options, problem, &summary)) return summary;
 
   // Remove the outliers, keeping the original indices of the removed ones.
@@ -259,8 +336,8 @@ BundleAdjustmentSummary LocalBundleAdjust(const Rig& rig, const BundleAdjustment
   kept.reserve(problem->observations.size());
   for (size_t i = 0; i < problem->observations.size(); ++i) {
     const BundleAdjustmentObservation& observation = problem->observations[i];
-    const ObservationFrame frame =
-        MakeObservationFrame(rig, options.mode, center, observation.camera, observation.bearing);
+    const ObservationFrame frame = MakeObservationFrame(
+        rig, options.mode, center, observation.camera, observation.bearing, summary.offset_scale);
     const double angle = AngleOf(frame, problem->keyframes[observation.keyframe].world_from_rig,
                                  problem->points_in_world[observation.point]);
     if (angle > options.max_outlier_angle)
@@ -273,7 +350,7 @@ BundleAdjustmentSummary LocalBundleAdjust(const Rig& rig, const BundleAdjustment
       !problem->observations.empty()) {
     if (!Solve(rig, options, problem, &summary)) return summary;
   }
-  summary.rms_angle_after = RmsAngle(rig, options, *problem);
+  summary.rms_angle_after = RmsAngle(rig, options, *problem, summary.offset_scale);
   summary.success = true;
   return summary;
 }

@@ -33,6 +33,12 @@ struct BundleAdjustmentOptions {
   // the problem is solved again once if any was.
   double max_outlier_angle = 0.01;
   bool resolve_after_outlier_removal = true;
+  // Non-central mode only: the camera offsets (cam_from_rig translations, metres) times one
+  // scale estimated with the poses and points (from offset_scale; bounded to
+  // [offset_scale / 100, offset_scale * 100]), for a map whose unit is not the metre: the true
+  // offsets in a central-mode map.
+  bool estimate_offset_scale = false;
+  double offset_scale = 1.0;
 
   std::string Check() const;
 };
@@ -65,13 +71,15 @@ struct BundleAdjustmentSummary {
   double final_cost = 0.0;
   double rms_angle_before = 0.0;  // radians, over all observations given
   double rms_angle_after = 0.0;   // radians, over the observations kept
+  double offset_scale = 1.0;      // the offsets' scale estimated (estimate_offset_scale)
   // Indices (into the observations given) of the observations removed as outliers.
   std::vector<int> removed_observations;
   std::string BriefReport() const;
 };
 
 // Angle between an observation's bearing and the direction to its point under the given
-// keyframe pose, in the options' mode (radians; pi when the point is at the centre).
+// keyframe pose, in the options' mode (radians; pi when the point is at the centre); offsets at
+// scale 1.
 double ObservationAngle(const Rig& rig, const BundleAdjustmentOptions::Mode mode,
                         const Rigid3d& world_from_rig, const Eigen::Vector3d& point_in_world,
                         int camera, const Eigen::Vector3d& bearing);

@@ -6,7 +6,9 @@
 #include <cassert>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <deque>
+#include <limits>
 #include <stdexcept>
 #include <unordered_map>
 #include <unordered_set>
@@ -1457,8 +1459,113 @@ void Tracker::MergeTracks(const std::vector<std::pair<int, int>>& drop_keep) {
   }
 }
 
-BundleAdjustmentSummary Tracker::GlobalBundleAdjust() {
+// The live points that are one place seen by two tracks (a corner whose track broke and was
+// detected again, a point of another camera) fused before a global adjustment: two points
+// closer than kSearchRadiusInMergeAngles * `merge_angle` times their depth (a point of a short
+// track is uncertain along its rays far more than across them), never observed by one camera of one
+// keyframe, whose observations all fit their observation-weighted mean within `merge_angle`. The
+// dropped point gives its observations to the kept one, dies, and its tracks follow. Returns the
+// number of points fused.
+constexpr double kSearchRadiusInMergeAngles = 20.0;
+
+template <typename PointT>
+int MergeNearbyPoints(const Rig& rig, BundleAdjustmentOptions::Mode mode,
+                      const std::vector<Rigid3d>& world_from_rig, double merge_angle,
+                      std::vector<PointT>* points, std::unordered_map<int, int>* track_to_point) {
+  std::vector<int> live;
+  std::vector<double> radius(points->size(), 0.0);
+  for (size_t p = 0; p < points->size(); ++p) {
+    const PointT& point = (*points)[p];
+    if (!point.alive || point.observations.empty()) continue;
+    double depth = std::numeric_limits<double>::max();
+    for (const auto& o : point.observations)
+      depth = std::min(depth, (point.position - world_from_rig[o.keyframe].translation).norm());
+    radius[p] = kSearchRadiusInMergeAngles * merge_angle * depth;
+    live.push_back(static_cast<int>(p));
+  }
+  if (live.size() < 2) return 0;
+  std::vector<double> radii;
+  for (int p : live) radii.push_back(radius[p]);
+  std::nth_element(radii.begin(), radii.begin() + radii.size() / 2, radii.end());
+  const double cell = std::max(radii[radii.size() / 2], 1e-9);
+  const auto key = [cell](const Eigen::Vector3d& x, int dx, int dy, int dz) {
+    const int64_t i = static_cast<int64_t>(std::floor(x.x() / cell)) + dx;
+    const int64_t j = static_cast<int64_t>(std::floor(x.y() / cell)) + dy;
+    const int64_t k = static_cast<int64_t>(std::floor(x.z() / cell)) + dz;
+    return (i * 73856093) ^ (j * 19349663) ^ (k * 83492791);
+  };
+  std::unordered_map<int64_t, std::vector<int>> grid;
+  for (int p : live) grid[key((*points)[p].position, 0, 0, 0)].push_back(p);
+
+  std::vector<int> merged_into(points->size(), -1);
+  int merged = 0;
+  for (int a : live) {
+    PointT& kept = (*points)[a];
+    if (!kept.alive) continue;
+    const int reach = std::min(3, static_cast<int>(std::ceil(radius[a] / cell)));
+    for (int dx = -reach; dx <= reach; ++dx)
+      for (int dy = -reach; dy <= reach; ++dy)
+        for (int dz = -reach; dz <= reach; ++dz) {
+          const auto it = grid.find(key(kept.position, dx, dy, dz));
+          if (it == grid.end()) continue;
+          for (int b : it->second) {
+            if (b == a || !(*points)[b].alive) continue;
+            PointT& other = (*points)[b];
+            if ((other.position - kept.position).norm() > std::min(radius[a], radius[b])) continue;
+            bool shared = false;
+            for (const auto& o : other.observations)
+              for (const auto& k : kept.observations)
+                shared = shared || (o.keyframe == k.keyframe && o.camera == k.camera);
+            if (shared) continue;
+            const double wa = static_cast<double>(kept.observations.size());
+            const double wb = static_cast<double>(other.observations.size());
+            const Eigen::Vector3d position = (wa * kept.position + wb * other.position) / (wa + wb);
+            bool fits = true;
+            for (const auto* observations : {&kept.observations, &other.observations})
+              for (const auto& o : *observations)
+                fits = fits && ObservationAngle(rig, mode, world_from_rig[o.keyframe], position,
+                                                o.camera, o.bearing) < merge_angle;
+            if (!fits) continue;
+            kept.position = position;
+            kept.observations.insert(kept.observations.end(), other.observations.begin(),
+                                     other.observations.end());
+            other.alive = false;
+            merged_into[b] = a;
+            ++merged;
+          }
+        }
+  }
+  if (merged == 0) return 0;
+  for (auto& [track, point] : *track_to_point) {
+    int target = point;
+    while (target >= 0 && merged_into[target] >= 0) target = merged_into[target];
+    point = target;
+  }
+  return merged;
+}
+
+BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double merge_angle,
+                                                    int* points_merged) {
   Impl& m = *impl_;
+  BundleAdjustmentOptions options = m.options.bundle_adjustment;
+  options.mode = m.options.central ? BundleAdjustmentOptions::Mode::kCentral
+                                   : BundleAdjustmentOptions::Mode::kNonCentral;
+  if (m.options.central && true_offsets) {
+    options.mode = BundleAdjustmentOptions::Mode::kNonCentral;
+    options.estimate_offset_scale = true;
+  }
+  int merged = 0;
+  if (merge_angle > 0.0) {
+    std::vector<Rigid3d> world_from_rig;
+    for (const Impl::Keyframe& keyframe : m.keyframes)
+      world_from_rig.push_back(keyframe.world_from_rig);
+    // The offsets' scale is not known before the adjustment: the fit is judged centrally then.
+    const BundleAdjustmentOptions::Mode merge_mode =
+        m.options.central ? BundleAdjustmentOptions::Mode::kCentral : options.mode;
+    merged = MergeNearbyPoints(m.rig, merge_mode, world_from_rig, merge_angle, &m.points,
+                               &m.track_to_point);
+  }
+  if (points_merged) *points_merged = merged;
   BundleAdjustmentProblem problem;
   for (size_t k = 0; k < m.keyframes.size(); ++k)
     problem.keyframes.push_back(
@@ -1473,9 +1580,6 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust() {
     for (const Impl::PointObservation& o : point.observations)
       problem.observations.push_back({o.keyframe, o.camera, index, o.bearing});
   }
-  BundleAdjustmentOptions options = m.options.bundle_adjustment;
-  options.mode = m.options.central ? BundleAdjustmentOptions::Mode::kCentral
-                                   : BundleAdjustmentOptions::Mode::kNonCentral;
   options.linear_solver = BundleAdjustmentOptions::LinearSolver::kSparseSchur;
   options.num_threads = m.options.global_bundle_adjustment_threads;
   if (problem.observations.empty()) return {};

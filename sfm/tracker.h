@@ -282,8 +282,14 @@ class Tracker {
   // `drop` gives its observations to the point of `keep` and dies; the track follows.
   void MergeTracks(const std::vector<std::pair<int, int>>& drop_keep);
   // Adjusts every keyframe (the first two fixed: the gauge) and every live point (Ceres, sparse
-  // Schur); observations found to be outliers are dropped.
-  BundleAdjustmentSummary GlobalBundleAdjust();
+  // Schur); observations found to be outliers are dropped. `true_offsets` in central mode: the
+  // adjustment uses each camera's true offset, at a scale it estimates (the map's unit is not
+  // the metre), instead of the central approximation; non-central mode has them anyway.
+  // `merge_angle` > 0: first the points that are one place seen by two tracks are fused (two
+  // points within merge_angle times their depth whose observations all fit one point within
+  // merge_angle; *points_merged, if given, counts them).
+  BundleAdjustmentSummary GlobalBundleAdjust(bool true_offsets = false, double merge_angle = 0.0,
+                                             int* points_merged = nullptr);
   // The keyframes finalised so far, rebuilt from the current map (after a correction), in order.
   // Each point's rays are those of keyframes up to the one that handed it over (the surface's
   // contract, docs/design.md §7); with all_rays, every keyframe that observes it (its complete

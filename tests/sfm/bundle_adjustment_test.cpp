@@ -139,6 +139,36 @@ TEST(BundleAdjustment, CentralModeIsBiasedOnAWideRig) {
   EXPECT_GT(central_summary.rms_angle_after, 1e-3);
 }
 
+TEST(BundleAdjustment, EstimatesTheScaleOfTheOffsetsInAMapThatIsNotMetric) {
+  // The scene of a rig with 0.4 m offsets in a map of 2.5 units per metre (poses and points
+  // scaled, the offsets in rig.json still in metres): with the offsets at scale 1 the
+  // observations cannot be fitted; with their scale estimated (from 1) they are, at 2.5.
+  const Rig rig = MakeSyntheticRingRig(5, true, 0.4);
+  SyntheticSceneOptions scene_options;
+  scene_options.num_points = 200;
+  scene_options.min_depth = 3.0;
+  scene_options.max_depth = 12.0;
+  scene_options.seed = 3;
+  const SyntheticScene scene = MakeSyntheticScene(rig, Trajectory(), scene_options);
+  const double map_units_per_metre = 2.5;
+  BundleAdjustmentProblem problem = ProblemFromScene(scene, 2);
+  for (BundleAdjustmentKeyframe& keyframe : problem.keyframes)
+    keyframe.world_from_rig.translation *= map_units_per_metre;
+  for (Eigen::Vector3d& point : problem.points_in_world) point *= map_units_per_metre;
+  BundleAdjustmentOptions options;
+  options.mode = BundleAdjustmentOptions::Mode::kNonCentral;
+  options.max_outlier_angle = M_PI;  // keep everything: compare the fits
+  BundleAdjustmentProblem unit_offsets = problem;
+  const BundleAdjustmentSummary unit = LocalBundleAdjust(rig, options, &unit_offsets);
+  options.estimate_offset_scale = true;
+  const BundleAdjustmentSummary scaled = LocalBundleAdjust(rig, options, &problem);
+  ASSERT_TRUE(unit.success && scaled.success);
+  EXPECT_GT(unit.rms_angle_after, 1e-3);
+  EXPECT_LT(scaled.rms_angle_after, 1e-7) << scaled.BriefReport();
+  EXPECT_NEAR(scaled.offset_scale, map_units_per_metre, 1e-4);
+  EXPECT_DOUBLE_EQ(unit.offset_scale, 1.0);
+}
+
 TEST(BundleAdjustment, FixedPointsDoNotMove) {
   const Rig rig = MakeSyntheticRingRig(5, true, 0.4);
   SyntheticSceneOptions scene_options;
@@ -176,6 +206,12 @@ TEST(BundleAdjustment, ObservationAngleMeasuresTheError) {
   EXPECT_NEAR(ObservationAngle(rig, BundleAdjustmentOptions::Mode::kNonCentral, world_from_rig,
                                point, 0, turned),
               0.01, 1e-12);
+}
+
+TEST(BundleAdjustmentOptions, CheckRejectsABadOffsetScale) {
+  BundleAdjustmentOptions options;
+  options.offset_scale = 0.0;
+  EXPECT_NE(options.Check().find("offset_scale"), std::string::npos);
 }
 
 TEST(BundleAdjustmentOptions, CheckRejectsBadValues) {

@@ -1529,6 +1529,9 @@ int MergeNearbyPoints(const Rig& rig, BundleAdjustmentOptions::Mode mode,
             kept.position = position;
             kept.observations.insert(kept.observations.end(), other.observations.begin(),
                                      other.observations.end());
+            kept.frame_observations.insert(kept.frame_observations.end(),
+                                           other.frame_observations.begin(),
+                                           other.frame_observations.end());
             other.alive = false;
             merged_into[b] = a;
             ++merged;

@@ -57,9 +57,12 @@ ObservationFrame MakeObservationFrame(const Rig& rig, BundleAdjustmentOptions::M
 // the angle θ between p and b, so r ≈ the two components of the angular error (radians) for
 // small errors, grows without bound as p turns away from b (a point behind is never cheap), and
 // is smooth everywhere except at p = −b.
-class AngularResidual {
- public:
-  explicit AngularResidual(const ObservationFrame& frame)
+// The residual of one observation from the point in the rig frame: x_frame = R_fr x_rig +
+// offset_scale · t_fr, then r as above. AngularResidual and ScaledOffsetAngularResidual differ
+// only in where offset_scale comes from.
+class AngularResidualBase {
+ protected:
+  explicit AngularResidualBase(const ObservationFrame& frame)
       : frame_from_rig_rotation_(frame.frame_from_rig_rotation),
         frame_from_rig_translation_(frame.frame_from_rig_translation),
         bearing_(frame.bearing) {
@@ -67,26 +70,19 @@ class AngularResidual {
     tangent_v_ = bearing_.cross(tangent_u_);
   }
 
-  // Parameters: world_from_rig rotation (Eigen quaternion x y z w), world_from_rig
-  // translation, point in the world.
   template <typename T>
-  bool operator()(const T* world_from_rig_q, const T* world_from_rig_t, const T* point,
-                  T* residual) const {
+  void Residual(const T* world_from_rig_q, const T* world_from_rig_t, const T* point,
+                const T& offset_scale, T* residual) const {
     const Eigen::Map<const Eigen::Quaternion<T>> q(world_from_rig_q);
     const Eigen::Map<const Eigen::Matrix<T, 3, 1>> t(world_from_rig_t);
     const Eigen::Map<const Eigen::Matrix<T, 3, 1>> x(point);
     const Eigen::Matrix<T, 3, 1> x_rig = q.conjugate() * (x - t);
-    const Eigen::Matrix<T, 3, 1> x_frame =
-        frame_from_rig_rotation_.cast<T>() * x_rig + frame_from_rig_translation_.cast<T>();
+    const Eigen::Matrix<T, 3, 1> x_frame = frame_from_rig_rotation_.cast<T>() * x_rig +
+                                           offset_scale * frame_from_rig_translation_.cast<T>();
     const Eigen::Matrix<T, 3, 1> p = x_frame / x_frame.norm();
     const T denominator = T(1.0) + bearing_.cast<T>().dot(p);
     residual[0] = T(2.0) * tangent_u_.cast<T>().dot(p) / denominator;
     residual[1] = T(2.0) * tangent_v_.cast<T>().dot(p) / denominator;
-    return true;
-  }
-
-  static ceres::CostFunction* Create(const ObservationFrame& frame) {
-    return new ceres::AutoDiffCostFunction<AngularResidual, 2, 4, 3, 3>(new AngularResidual(frame));
   }
 
  private:
@@ -97,31 +93,35 @@ class AngularResidual {
   Eigen::Vector3d tangent_v_;
 };
 
+class AngularResidual : public AngularResidualBase {
+ public:
+  explicit AngularResidual(const ObservationFrame& frame) : AngularResidualBase(frame) {}
+
+  // Parameters: world_from_rig rotation (Eigen quaternion x y z w), world_from_rig
+  // translation, point in the world.
+  template <typename T>
+  bool operator()(const T* world_from_rig_q, const T* world_from_rig_t, const T* point,
+                  T* residual) const {
+    Residual(world_from_rig_q, world_from_rig_t, point, T(1.0), residual);
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const ObservationFrame& frame) {
+    return new ceres::AutoDiffCostFunction<AngularResidual, 2, 4, 3, 3>(new AngularResidual(frame));
+  }
+};
+
 // As AngularResidual, the frame_from_rig translation (a camera's offset, in metres) times a
 // scale that is a parameter: x_frame = R_fr x_rig + s t_fr.
-class ScaledOffsetAngularResidual {
+class ScaledOffsetAngularResidual : public AngularResidualBase {
  public:
   explicit ScaledOffsetAngularResidual(const ObservationFrame& frame)
-      : frame_from_rig_rotation_(frame.frame_from_rig_rotation),
-        frame_from_rig_translation_(frame.frame_from_rig_translation),
-        bearing_(frame.bearing) {
-    tangent_u_ = bearing_.unitOrthogonal();
-    tangent_v_ = bearing_.cross(tangent_u_);
-  }
+      : AngularResidualBase(frame) {}
 
   template <typename T>
   bool operator()(const T* world_from_rig_q, const T* world_from_rig_t, const T* point,
                   const T* offset_scale, T* residual) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> q(world_from_rig_q);
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> t(world_from_rig_t);
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> x(point);
-    const Eigen::Matrix<T, 3, 1> x_rig = q.conjugate() * (x - t);
-    const Eigen::Matrix<T, 3, 1> x_frame = frame_from_rig_rotation_.cast<T>() * x_rig +
-                                           offset_scale[0] * frame_from_rig_translation_.cast<T>();
-    const Eigen::Matrix<T, 3, 1> p = x_frame / x_frame.norm();
-    const T denominator = T(1.0) + bearing_.cast<T>().dot(p);
-    residual[0] = T(2.0) * tangent_u_.cast<T>().dot(p) / denominator;
-    residual[1] = T(2.0) * tangent_v_.cast<T>().dot(p) / denominator;
+    Residual(world_from_rig_q, world_from_rig_t, point, offset_scale[0], residual);
     return true;
   }
 
@@ -129,13 +129,6 @@ class ScaledOffsetAngularResidual {
     return new ceres::AutoDiffCostFunction<ScaledOffsetAngularResidual, 2, 4, 3, 3, 1>(
         new ScaledOffsetAngularResidual(frame));
   }
-
- private:
-  Eigen::Matrix3d frame_from_rig_rotation_;
-  Eigen::Vector3d frame_from_rig_translation_;
-  Eigen::Vector3d bearing_;
-  Eigen::Vector3d tangent_u_;
-  Eigen::Vector3d tangent_v_;
 };
 
 bool EstimatesOffsetScale(const BundleAdjustmentOptions& options) {

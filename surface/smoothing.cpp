@@ -62,26 +62,16 @@ struct UmbrellaTriangle {
 void UmbrellaOf(VertexHandle v, const CellHandle* begin, const CellHandle* end,
                 std::vector<UmbrellaTriangle>& out) {
   out.clear();
-  for (const CellHandle* it = begin; it != end; ++it) {
-    const CellHandle& c = *it;
-    if (!c->info().in_o) continue;
-    const int i = c->index(v);
-    for (int k = 0; k < 4; ++k) {
-      if (k == i || c->neighbor(k)->info().in_o) continue;
-      VertexHandle e[2];
-      int n = 0;
-      for (int m = 0; m < 4; ++m) {
-        if (m != i && m != k) e[n++] = c->vertex(m);
-      }
-      VertexHandle a = e[0], b = e[1];
-      // Counter-clockwise seen from O: the cell's vertex k (on O's side) above (v, a, b).
-      if (CGAL::orientation(v->point(), a->point(), b->point(), c->vertex(k)->point()) ==
-          CGAL::NEGATIVE) {
-        std::swap(a, b);
-      }
-      out.push_back({a, b});
-    }
-  }
+  ForEachBorderTriangleIn(
+      begin, end, v, [&](const CellHandle& c, int k, VertexHandle a, VertexHandle b) {
+        // Counter-clockwise seen from O: the cell's vertex k (on O's side)
+        // above (v, a, b).
+        if (CGAL::orientation(v->point(), a->point(), b->point(), c->vertex(k)->point()) ==
+            CGAL::NEGATIVE) {
+          std::swap(a, b);
+        }
+        out.push_back({a, b});
+      });
 }
 
 uint64_t UmbrellaHash(const std::vector<UmbrellaTriangle>& umbrella) {

@@ -63,13 +63,15 @@ using CellHandle = Delaunay::Cell_handle;
 inline Point ToCgal(const Eigen::Vector3d& p) { return Point(p.x(), p.y(), p.z()); }
 inline Eigen::Vector3d ToEigen(const Point& p) { return Eigen::Vector3d(p.x(), p.y(), p.z()); }
 
-// Calls visit(cell, k, a, b) for each δO triangle around v among the cells of `star` (v's star,
-// or part of it): facet k of a cell of O incident to v whose neighbour across it is outside O;
+// Calls visit(cell, k, a, b) for each δO triangle around v among the cells [begin, end) (v's
+// star, or part of it): facet k of a cell of O incident to v whose neighbour across it is outside O;
 // a and b are the facet's vertices other than v (its v-opposite edge), in the cell's vertex
 // order.
 template <class Visit>
-void ForEachBorderTriangleIn(const std::vector<CellHandle>& star, VertexHandle v, Visit&& visit) {
-  for (const CellHandle& c : star) {
+void ForEachBorderTriangleIn(const CellHandle* begin, const CellHandle* end, VertexHandle v,
+                             Visit&& visit) {
+  for (const CellHandle* it = begin; it != end; ++it) {
+    const CellHandle& c = *it;
     if (!c->info().in_o) continue;
     const int i = c->index(v);
     for (int k = 0; k < 4; ++k) {
@@ -82,6 +84,11 @@ void ForEachBorderTriangleIn(const std::vector<CellHandle>& star, VertexHandle v
       visit(c, k, e[0], e[1]);
     }
   }
+}
+// The same among the cells of `star`.
+template <class Visit>
+void ForEachBorderTriangleIn(const std::vector<CellHandle>& star, VertexHandle v, Visit&& visit) {
+  ForEachBorderTriangleIn(star.data(), star.data() + star.size(), v, std::forward<Visit>(visit));
 }
 
 // The same around v, its star found by CGAL (DelaunayMesh::Impl::IncidentCells finds it without

@@ -281,6 +281,20 @@ struct Tracker::Impl {
   void RecordFrameRays(const Rigid3d& world_from_rig,
                        const std::vector<TrackObservation>& observations,
                        const std::vector<int>& of_map_points);
+  // Whether a frame posed at world_from_rig has moved since the last frame that gave rays (or
+  // the last keyframe) by at least kMinFrameRayStepShare of the mean step: a rig standing still
+  // gives no rays that its last ones did not (and keeps no observations for them).
+  static constexpr double kMinFrameRayStepShare = 0.25;
+  bool MovedSinceLastRays(const Rigid3d& world_from_rig) const {
+    if (travelled_steps == 0) return true;
+    const int last = static_cast<int>(keyframes.size()) - 1;
+    const Eigen::Vector3d last_center =
+        !frame_stamps.empty() && frame_stamps.back().keyframe == last
+            ? FrameStampPose(frame_stamps.back()).translation
+            : keyframes[last].world_from_rig.translation;
+    return (world_from_rig.translation - last_center).norm() >=
+           kMinFrameRayStepShare * travelled / travelled_steps;
+  }
   // The frame rays of the points just created from `new_tracks` (track → point).
   void AddRecentFrameRays(const std::unordered_map<int, int>& new_tracks);
   // Initialise or Track, and what follows from it (the motion model, the frames read while
@@ -723,7 +737,8 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   }
   result.status += decision.reason;
   if (decision.decision != KeyframeDecision::kKeyframe) {
-    if (options.frame_ray_step > 0 && ++tracked_since_keyframe % options.frame_ray_step == 0) {
+    if (options.frame_ray_step > 0 && ++tracked_since_keyframe % options.frame_ray_step == 0 &&
+        MovedSinceLastRays(world_from_rig)) {
       std::vector<int> of_map_points = reobserved;
       for (size_t k = 0; k < bearings.size(); ++k)
         if (ransac.inlier_mask[k]) of_map_points.push_back(observation_index[k]);

@@ -255,6 +255,25 @@ TEST_P(TrackerFrameRaysTest, PointsCarryTheRaysOfTheFramesBetweenKeyframes) {
                                   static_cast<double>(std::max<size_t>(points, 1))));
 }
 
+// A rig that stands still (the last frame again and again, a red light) gives no frame rays:
+// they would repeat the last ones.
+TEST(TrackerFrameRays, ARigStandingStillGivesNoMoreRays) {
+  SyntheticDrive drive = MakeDrive(0.05, 40, 0.0003, 0.0);
+  const size_t moving = drive.frames.size();
+  for (int i = 0; i < 40; ++i) {
+    drive.frames.push_back(drive.frames[moving - 1]);
+    drive.world_from_rig.push_back(drive.world_from_rig[moving - 1]);
+  }
+  const HandedOver run = RunForFrameRays(drive, true, 1);
+  size_t while_moving = 0, standing = 0;
+  for (const FinalizedKeyframe& keyframe : run.keyframes)
+    for (const FinalizedPoint& point : keyframe.points)
+      for (const FinalizedFrameRay& ray : point.frame_rays)
+        ++(static_cast<size_t>(ray.frame) < moving ? while_moving : standing);
+  EXPECT_GT(while_moving, 0u);
+  EXPECT_EQ(standing, 0u);
+}
+
 INSTANTIATE_TEST_SUITE_P(Modes, TrackerFrameRaysTest,
                          ::testing::Values(Case{true, 0.05}, Case{false, 0.3}));
 

@@ -26,6 +26,20 @@ double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
+// The distance between keyframe k and the one before it (k >= 1), as the map is now.
+double KeyframeDistance(const Tracker& tracker, int k) {
+  return (tracker.KeyframePose(k).translation - tracker.KeyframePose(k - 1).translation).norm();
+}
+
+// The final pose of `keyframe` in the run's keyframes, when it has one.
+bool FinalKeyframePose(const SfmRunResult& run, int keyframe, Rigid3d* world_from_keyframe) {
+  if (keyframe < 0 || static_cast<size_t>(keyframe) >= run.keyframes.size() ||
+      run.keyframes[keyframe].keyframe != keyframe)
+    return false;
+  *world_from_keyframe = run.keyframes[keyframe].world_from_rig;
+  return true;
+}
+
 }  // namespace
 
 std::string SfmRunnerOptions::Check() const {
@@ -250,11 +264,8 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
     }
     // The newest two keyframes before the frame: a new keyframe's adjustment may rescale them.
     const int keyframes_before = tracker.NumKeyframes();
-    double distance_before = 0.0;
-    if (keyframes_before >= 2)
-      distance_before = (tracker.KeyframePose(keyframes_before - 1).translation -
-                         tracker.KeyframePose(keyframes_before - 2).translation)
-                            .norm();
+    const double distance_before =
+        keyframes_before >= 2 ? KeyframeDistance(tracker, keyframes_before - 1) : 0.0;
     row.result = tracker.AddFrame(tracked.observations, s.builder.MapPointSearcher());
     if (!row.result.tracked && s.options.descriptor_retry) {
       // Without a map only the first keyframe can help (the last tracked frame).
@@ -285,9 +296,7 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
       if (row.result.keyframe) {
         double scale = 1.0;
         if (distance_before > 0.0 && tracker.NumKeyframes() == keyframes_before + 1) {
-          const double distance_after = (tracker.KeyframePose(keyframes_before - 1).translation -
-                                         tracker.KeyframePose(keyframes_before - 2).translation)
-                                            .norm();
+          const double distance_after = KeyframeDistance(tracker, keyframes_before - 1);
           if (distance_after > 0.0) scale = distance_after / distance_before;
         }
         s.SetNextReferences(tracker.NumKeyframes() - 1, scale);
@@ -436,26 +445,21 @@ std::vector<SfmFramePose> TrackedFramePoses(const SfmRunResult& run) {
   std::vector<SfmFramePose> poses;
   for (const SfmFrameRow& row : run.frames) {
     if (!row.result.tracked) continue;
-    const int k = row.reference_keyframe;
-    const auto final_pose = [&run](int keyframe, Rigid3d* world_from_keyframe) {
-      if (keyframe < 0 || static_cast<size_t>(keyframe) >= run.keyframes.size() ||
-          run.keyframes[keyframe].keyframe != keyframe)
-        return false;
-      *world_from_keyframe = run.keyframes[keyframe].world_from_rig;
-      return true;
-    };
     Rigid3d world_from_reference, world_from_next;
-    if (final_pose(k, &world_from_reference) && final_pose(row.next_keyframe, &world_from_next)) {
-      const Rigid3d from_reference = world_from_reference * row.keyframe_from_rig;
+    if (!FinalKeyframePose(run, row.reference_keyframe, &world_from_reference)) {
+      poses.push_back({row.frame, row.result.world_from_rig});
+      continue;
+    }
+    const Rigid3d from_reference = world_from_reference * row.keyframe_from_rig;
+    if (FinalKeyframePose(run, row.next_keyframe, &world_from_next)) {
       const Rigid3d from_next = world_from_next * row.next_keyframe_from_rig;
       const double w = row.next_keyframe_weight;
       poses.push_back(
           {row.frame, Rigid3d(from_reference.rotation.slerp(w, from_next.rotation),
                               (1.0 - w) * from_reference.translation + w * from_next.translation)});
-    } else if (final_pose(k, &world_from_reference))
-      poses.push_back({row.frame, world_from_reference * row.keyframe_from_rig});
-    else
-      poses.push_back({row.frame, row.result.world_from_rig});
+    } else {
+      poses.push_back({row.frame, from_reference});
+    }
   }
   return poses;
 }

@@ -210,6 +210,14 @@ struct Tracker::Impl {
     const Eigen::Vector3d in_rig = rig.cameras[camera].cam_from_rig.rotation.conjugate() * bearing;
     return WorldRay{world_from_rig * CenterInRig(camera), world_from_rig.rotation * in_rig};
   }
+  // The angle between an observation's ray from a frame posed at world_from_rig and the
+  // direction from its optical centre to `position` (radians).
+  double ObservationAngleError(const Rigid3d& world_from_rig, const TrackObservation& observation,
+                               const Eigen::Vector3d& position) const {
+    const WorldRay ray = Ray(world_from_rig, observation.camera, observation.bearing);
+    const Eigen::Vector3d to_point = position - ray.center;
+    return std::atan2(ray.direction.cross(to_point).norm(), ray.direction.dot(to_point));
+  }
   // world_from_rig from the pose of the central frame F (rig axes, origin c0).
   Rigid3d RigFromCentral(const Rigid3d& world_from_central) const {
     return Rigid3d(world_from_central.rotation,
@@ -294,6 +302,14 @@ struct Tracker::Impl {
             : keyframes[last].world_from_rig.translation;
     return (world_from_rig.translation - last_center).norm() >=
            kMinFrameRayStepShare * travelled / travelled_steps;
+  }
+  // A frame observation of `point`; in central mode one per frame (two cameras of a frame share
+  // its one optical centre).
+  void AddFrameObservation(Point* point, int stamp, int camera) {
+    if (options.central && !point->frame_observations.empty() &&
+        point->frame_observations.back().stamp == stamp)
+      return;
+    point->frame_observations.push_back({stamp, camera});
   }
   // The frame rays of the points just created from `new_tracks` (track → point).
   void AddRecentFrameRays(const std::unordered_map<int, int>& new_tracks);
@@ -711,9 +727,7 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
     if (in_resection[j]) continue;
     const auto it = track_to_point.find(observations[j].track);
     if (it == track_to_point.end() || !points[it->second].alive) continue;
-    const WorldRay ray = Ray(world_from_rig, observations[j].camera, observations[j].bearing);
-    const Eigen::Vector3d to_point = points[it->second].position - ray.center;
-    if (std::atan2(ray.direction.cross(to_point).norm(), ray.direction.dot(to_point)) >
+    if (ObservationAngleError(world_from_rig, observations[j], points[it->second].position) >
         options.reobservation_max_angle_error)
       continue;
     reobserved.push_back(static_cast<int>(j));
@@ -1073,14 +1087,9 @@ void Tracker::Impl::RecordFrameRays(const Rigid3d& world_from_rig,
   frame_stamps.push_back({num_frames - 1, keyframe,
                           keyframes[keyframe].world_from_rig.Inverse() * world_from_rig,
                           KeyframeStep(keyframe)});
-  for (int j : of_map_points) {
-    Point& point = points[track_to_point.at(observations[j].track)];
-    // Two cameras of one frame: one ray in central mode (one optical centre).
-    if (options.central && !point.frame_observations.empty() &&
-        point.frame_observations.back().stamp == stamp)
-      continue;
-    point.frame_observations.push_back({stamp, observations[j].camera});
-  }
+  for (int j : of_map_points)
+    AddFrameObservation(&points[track_to_point.at(observations[j].track)], stamp,
+                        observations[j].camera);
   RecentFrame recent;
   recent.stamp = stamp;
   for (const TrackObservation& observation : observations)
@@ -1096,15 +1105,10 @@ void Tracker::Impl::AddRecentFrameRays(const std::unordered_map<int, int>& new_t
       const auto it = new_tracks.find(observation.track);
       if (it == new_tracks.end()) continue;
       Point& point = points[it->second];
-      const WorldRay ray = Ray(world_from_rig, observation.camera, observation.bearing);
-      const Eigen::Vector3d to_point = point.position - ray.center;
-      if (std::atan2(ray.direction.cross(to_point).norm(), ray.direction.dot(to_point)) >
+      if (ObservationAngleError(world_from_rig, observation, point.position) >
           options.reobservation_max_angle_error)
         continue;
-      if (options.central && !point.frame_observations.empty() &&
-          point.frame_observations.back().stamp == recent.stamp)
-        continue;
-      point.frame_observations.push_back({recent.stamp, observation.camera});
+      AddFrameObservation(&point, recent.stamp, observation.camera);
     }
   }
 }

@@ -266,6 +266,11 @@ void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
                    "many degrees apart (its triangulation angle)")
       ->capture_default_str();
   command
+      ->add_option("--min-point-separation", sculptor->min_point_separation_factor,
+                   "A point closer than this times s to a vertex is that vertex (0: exact "
+                   "duplicates only)")
+      ->capture_default_str();
+  command
       ->add_option("--reach-quantile", sculptor->reach_quantile,
                    "s is at least the first keyframes' points' distance to their keyframe at "
                    "this quantile (those with a wide aperture) over the ray-length factor 15, so "
@@ -295,6 +300,12 @@ void AddObservedMeshOptions(CLI::App* command, ObservedMeshOptions* observed) {
       ->add_option("--observed-max-edge", observed->max_edge_factor,
                    "surface.ply: leave out the triangles of δO with an edge longer than this "
                    "times s (the ceiling over the streets, the caps; 0: no bound)")
+      ->capture_default_str();
+  command
+      ->add_option("--observed-max-edge-angle", observed->max_edge_angle,
+                   "surface.ply: keep a triangle whose longest edge subtends at most this angle "
+                   "(radians) from the nearest ray centre of its vertices, whatever its length "
+                   "(0: off)")
       ->capture_default_str();
   command
       ->add_option("--observed-max-spacing", observed->max_spacing_factor,

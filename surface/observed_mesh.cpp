@@ -37,11 +37,28 @@ int Find(std::vector<int>& parent, int x) {
   return x;
 }
 
+// The length that subtends `angle` at the distance from the centroid of triangle t to the
+// nearest optical centre of its vertices' rays (the chord of the angle at that distance).
+double EdgeLengthWithinAngle(const std::vector<Eigen::Vector3d>& p, const Eigen::Vector3i& t,
+                             const std::vector<ObservedVertex>& vertices, double angle) {
+  const Eigen::Vector3d centroid = (p[t[0]] + p[t[1]] + p[t[2]]) / 3.0;
+  double nearest_squared = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 3; ++k) {
+    for (const Eigen::Vector3d& origin : *vertices[t[k]].origins) {
+      nearest_squared = std::min(nearest_squared, (origin - centroid).squaredNorm());
+    }
+  }
+  return 2.0 * std::sqrt(nearest_squared) * std::sin(0.5 * angle);
+}
+
 }  // namespace
 
 std::string ObservedMeshOptions::Check() const {
   if (!(max_edge_factor >= 0.0) || !std::isfinite(max_edge_factor)) {
     return "observed.max_edge_factor must be >= 0 (0: no bound)";
+  }
+  if (!(max_edge_angle >= 0.0 && max_edge_angle < M_PI)) {
+    return "observed.max_edge_angle must be in [0, pi) (0: off)";
   }
   if (!(max_spacing_factor >= 0.0) || !std::isfinite(max_spacing_factor)) {
     return "observed.max_spacing_factor must be >= 0 (0: no bound)";
@@ -168,11 +185,14 @@ TriangleMesh SelectObservedMesh(const TriangleMesh& closed,
     }
     const double longest = std::max(
         {(p[t[0]] - p[t[1]]).norm(), (p[t[1]] - p[t[2]]).norm(), (p[t[2]] - p[t[0]]).norm()});
-    if (longest > max_edge) {
+    const bool small_in_view =
+        options.max_edge_angle > 0.0 &&
+        longest <= EdgeLengthWithinAngle(p, t, vertices, options.max_edge_angle);
+    if (longest > max_edge && !small_in_view) {
       ++st.long_edges;
       continue;
     }
-    if (options.max_spacing_factor > 0.0) {
+    if (options.max_spacing_factor > 0.0 && !small_in_view) {
       const double local = std::max({spacing[t[0]], spacing[t[1]], spacing[t[2]]});
       if (longest > options.max_spacing_factor * local) {
         ++st.sparse;

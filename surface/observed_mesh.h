@@ -21,6 +21,12 @@ struct ObservedMeshOptions {
   // distance between consecutive keyframe centres) is dropped: a triangle bounded by points spans
   // the spacing of the points, a ceiling triangle spans the street. 0: no bound.
   double max_edge_factor = 2.0;
+  // A triangle whose longest edge subtends at most max_edge_angle (radians) from the nearest
+  // optical centre of its vertices' rays passes the edge bounds whatever its length: points far
+  // from the cameras are sparse in metres but not in the images, so a far facade spans longer
+  // edges than max_edge_factor × s allows, while the ceiling over a street spans a wide angle
+  // from the cameras that saw its corners. 0: off.
+  double max_edge_angle = 0.0;
   // A triangle with an edge longer than max_spacing_factor × the local point spacing (the larger
   // of its vertices' spacings; a vertex's spacing is its shortest δO edge to another point) is
   // dropped: the bound follows the density of the points where s does not. 0: no bound.
@@ -41,7 +47,7 @@ struct ObservedMeshOptions {
 struct ObservedMeshStats {
   size_t closed_triangles = 0;  // triangles of δO
   size_t steiner = 0;           // a Steiner vertex
-  size_t long_edges = 0;        // max_edge_factor
+  size_t long_edges = 0;        // max_edge_factor (and not within max_edge_angle)
   size_t sparse = 0;            // max_spacing_factor
   size_t unseen = 0;            // require_seen
   size_t manifold_repair = 0;   // around the vertices where two boundary loops touched

@@ -35,6 +35,9 @@ std::string SculptorOptions::Check() const {
   if (!(scale >= 0.0) || !std::isfinite(scale)) return "scale must be >= 0 (0: measured)";
   if (!(steiner_step_factor > 0.0)) return "steiner_step_factor must be > 0";
   if (!(max_ray_length_factor > 0.0)) return "max_ray_length_factor must be > 0";
+  if (!(min_point_separation_factor >= 0.0 && min_point_separation_factor < 1.0)) {
+    return "min_point_separation_factor must be in [0, 1)";
+  }
   if (!(below_ground_factor >= 0.0)) return "below_ground_factor must be >= 0";
   if (!(reach_quantile >= 0.0 && reach_quantile <= 1.0)) return "reach_quantile must be in [0, 1]";
   if (!(ground_quantile >= 0.0 && ground_quantile <= 1.0)) {
@@ -464,6 +467,15 @@ struct IncrementalSculptor::Impl {
     if (lt == internal::Delaunay::VERTEX) {
       *duplicate = true;
       return VertexHandle();
+    }
+    if (options.min_point_separation_factor > 0.0) {
+      const double separation = options.min_point_separation_factor * s;
+      const VertexHandle nearest = t.tri.nearest_vertex(p, c);
+      if (nearest != VertexHandle() && !t.tri.is_infinite(nearest) &&
+          CGAL::squared_distance(nearest->point(), p) < separation * separation) {
+        *duplicate = true;
+        return VertexHandle();
+      }
     }
     thread_local std::vector<CellHandle> conflicts;
     conflicts.clear();

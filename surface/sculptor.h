@@ -137,6 +137,12 @@ struct SculptorOptions {
   // r of §3.3 in units of s: points farther than r from their keyframe centre are filtered
   // out (paper §5.1: ‖p − c_t‖ ≤ 15 s).
   double max_ray_length_factor = 15.0;
+  // A point closer than min_point_separation_factor × s to a vertex is that vertex (counted
+  // as a duplicate): a COLMAP model holds points a few nanometres apart, which round to one
+  // position in the float coordinates of the PLY files and make zero-area triangles there, and
+  // give the triangulation needle cells. SfM points that close are one point. 0: exact
+  // duplicates only.
+  double min_point_separation_factor = 1e-3;
   // Point filters of §5.1.
   bool filter_points = true;
   // Reject (p − c_t)·up < −b, b = max(below_ground_factor · s, g + ground_margin_factor · s)
@@ -228,7 +234,7 @@ struct KeyframeStats {
   size_t points_filtered = 0;   // removed by the §5.1 filters: the sum of the four below
   size_t points_added = 0;      // inserted in T
   size_t points_rejected = 0;   // conflict zone met O (§4.3)
-  size_t points_duplicate = 0;  // equal to an existing vertex
+  size_t points_duplicate = 0;  // an existing vertex, or within min_point_separation_factor · s
   size_t steiner_added = 0;
   size_t rays_new = 0;                           // rays of the new points, traced fully
   size_t rays_old = 0;                           // older rays re-traced over N (§4.4)

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <map>
 #include <random>
 #include <set>
@@ -211,11 +212,56 @@ TEST(ObservedMesh, ColorMeshVerticesGivesEachVertexItsPointsColourAndSteinerGrey
   EXPECT_THROW(ColorMeshVertices({PointId(7)}, colors, &mesh), std::invalid_argument);
 }
 
+// Two closed tetrahedra with 4 m edges seen from a camera at the origin, one 40 m away and one
+// 5 m away, at s = 1 m: the edge bound (2 s) drops both; within 0.2 rad of the nearest ray
+// centre (a chord of 8 m at 40 m, 1 m at 5 m) the far one is kept, whole, and the near one is
+// not.
+TEST(ObservedMesh, TheEdgeAngleKeepsFarTrianglesSmallInViewAndNotNearLongOnes) {
+  TriangleMesh closed;
+  const Eigen::Vector3i faces[] = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
+  for (double distance : {40.0, 5.0}) {
+    const int first = static_cast<int>(closed.vertices.size());
+    const Eigen::Vector3d centre(distance, 0.0, 0.0);
+    const double a = 4.0 / std::sqrt(8.0);  // corners (±a, ±a, ±a): edges 4 m
+    closed.vertices.push_back(centre + Eigen::Vector3d(a, a, a));
+    closed.vertices.push_back(centre + Eigen::Vector3d(a, -a, -a));
+    closed.vertices.push_back(centre + Eigen::Vector3d(-a, a, -a));
+    closed.vertices.push_back(centre + Eigen::Vector3d(-a, -a, a));
+    for (const Eigen::Vector3i& f : faces) closed.triangles.push_back(f.array() + first);
+  }
+  const std::vector<Eigen::Vector3d> origins = {Eigen::Vector3d::Zero()};
+  const std::vector<ObservedVertex> vertices(closed.vertices.size(), ObservedVertex{&origins});
+  ObservedMeshOptions options;
+  options.require_seen = false;
+  ObservedMeshStats stats;
+  EXPECT_TRUE(
+      SelectObservedMesh(closed, vertices, 1.0, options, nullptr, &stats).triangles.empty());
+  EXPECT_EQ(stats.long_edges, 8u);
+
+  options.max_edge_angle = 0.2;
+  std::vector<int> kept_vertices;
+  const TriangleMesh kept =
+      SelectObservedMesh(closed, vertices, 1.0, options, &kept_vertices, &stats);
+  EXPECT_EQ(kept.triangles.size(), 4u);
+  EXPECT_EQ(kept_vertices, (std::vector<int>{0, 1, 2, 3}));
+  EXPECT_EQ(stats.long_edges, 4u);
+  EXPECT_TRUE(CheckMesh(kept).ok) << CheckMesh(kept).Summary();
+
+  // 0.05 rad (a 2 m chord at 40 m) keeps neither.
+  options.max_edge_angle = 0.05;
+  EXPECT_TRUE(SelectObservedMesh(closed, vertices, 1.0, options).triangles.empty());
+}
+
 TEST(ObservedMeshOptions, CheckRejectsBadValues) {
   EXPECT_EQ(ObservedMeshOptions().Check(), "");
   ObservedMeshOptions o;
   o.max_edge_factor = -1.0;
   EXPECT_NE(o.Check().find("observed.max_edge_factor"), std::string::npos);
+  o = {};
+  o.max_edge_angle = -0.1;
+  EXPECT_NE(o.Check().find("observed.max_edge_angle"), std::string::npos);
+  o.max_edge_angle = 4.0;
+  EXPECT_NE(o.Check().find("observed.max_edge_angle"), std::string::npos);
   o = {};
   o.max_spacing_factor = -0.5;
   EXPECT_NE(o.Check().find("observed.max_spacing_factor"), std::string::npos);

@@ -7,9 +7,11 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <random>
+#include <set>
 
 #include "calib/mesh_check.h"
 #include "tests/calib/options_error_check.h"
@@ -496,6 +498,63 @@ TEST(IncrementalSculptor, FreeRaysCarveTheCellsTheyCross) {
   EXPECT_GT(with, without);
 }
 
+// A quarter of the street's points come twice, 4 nm apart (as in a COLMAP model): by default
+// each twin is the vertex of its original (a duplicate), so no two vertices of T share a
+// position once rounded to the float coordinates of a PLY file, and δO written as floats is
+// still a closed 2-manifold without zero-area triangles; without the separation both twins are
+// vertices and collapse in float.
+TEST(IncrementalSculptor, PointsCloserThanTheSeparationAreOneVertex) {
+  std::vector<SurfaceKeyframe> drive = testing::NoisyStreet(20, 80, 0.02, 5);
+  size_t twins = 0;
+  for (SurfaceKeyframe& kf : drive) {
+    const size_t n = kf.points.size();
+    for (size_t i = 0; i < n; i += 4) {
+      SurfacePoint twin = kf.points[i];
+      twin.id = PointId(static_cast<uint32_t>(1000000 + twins++));
+      twin.position += Eigen::Vector3d(3e-9, -2e-9, 1e-9);
+      kf.points.push_back(twin);
+    }
+  }
+  struct Run {
+    size_t duplicates = 0, added = 0, float_collisions = 0;
+    TriangleMesh closed;
+  };
+  auto run = [&drive](double separation_factor) {
+    SculptorOptions options;
+    options.init_keyframes = 10;
+    options.min_point_separation_factor = separation_factor;
+    IncrementalSculptor sculptor(options);
+    Run r;
+    auto count = [&r](const std::vector<KeyframeStats>& stats) {
+      for (const KeyframeStats& st : stats) {
+        r.duplicates += st.points_duplicate;
+        r.added += st.points_added;
+      }
+    };
+    for (const SurfaceKeyframe& kf : drive) count(sculptor.AddKeyframe(kf));
+    count(sculptor.Finish());
+    EXPECT_EQ(sculptor.CheckInvariants(), "");
+    std::set<std::array<float, 3>> positions;
+    const DelaunayMesh& tri = sculptor.triangulation();
+    for (size_t v = 0; v < tri.NumVertices(); ++v) {
+      const Eigen::Vector3f q = tri.Position(static_cast<int>(v)).cast<float>();
+      r.float_collisions += !positions.insert({q.x(), q.y(), q.z()}).second;
+    }
+    r.closed = sculptor.ExtractMesh();
+    for (Eigen::Vector3d& q : r.closed.vertices) q = q.cast<float>().cast<double>();
+    return r;
+  };
+  const Run merged = run(SculptorOptions().min_point_separation_factor);
+  const Run apart = run(0.0);
+  EXPECT_GE(merged.duplicates, twins / 2) << twins << " twins";
+  EXPECT_EQ(merged.float_collisions, 0u);
+  const MeshCheckReport report = CheckMesh(merged.closed);
+  EXPECT_TRUE(report.ok) << report.Summary();
+  EXPECT_EQ(apart.duplicates, 0u);
+  EXPECT_GT(apart.added, merged.added);
+  EXPECT_GE(apart.float_collisions, merged.duplicates / 2);
+}
+
 TEST(SculptorOptions, CheckRejectsBadValues) {
   SculptorOptions o;
   EXPECT_EQ(o.Check(), "");
@@ -508,6 +567,10 @@ TEST(SculptorOptions, CheckRejectsBadValues) {
   EXPECT_EQ(o.Check(), "");
   o.min_aperture_deg = 180.0;
   EXPECT_NE(o.Check(), "");
+  o = SculptorOptions();
+  o.min_point_separation_factor = -1e-3;
+  EXPECT_NE(o.Check().find("min_point_separation_factor"), std::string::npos);
+  o.min_aperture_deg = 180.0;
   EXPECT_THROW(IncrementalSculptor{o}, std::invalid_argument);
 }
 

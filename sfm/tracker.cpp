@@ -72,6 +72,14 @@ std::string TrackerOptions::Check() const {
   return {};
 }
 
+std::string FramePoseRefinementOptions::Check() const {
+  if (min_inliers < 4) return "min_inliers: expected at least 4";
+  if (!(min_inlier_share > 0.0 && min_inlier_share <= 1.0))
+    return "min_inlier_share: expected a share in (0, 1]";
+  if (max_iterations < 1) return "max_iterations: expected at least 1";
+  return {};
+}
+
 struct Tracker::Impl {
   struct PointObservation {
     int keyframe;
@@ -124,6 +132,14 @@ struct Tracker::Impl {
     double keyframe_step = 0.0;  // that distance when the frame was tracked; 0: not scaled
   };
   std::vector<FrameStamp> frame_stamps;
+  // TrackerOptions::keep_frame_observations: each tracked frame's observations of map points
+  // (track, camera, bearing in the camera frame, single precision), by frame.
+  struct KeptObservation {
+    int track;
+    int camera;
+    Eigen::Vector3f bearing;
+  };
+  std::unordered_map<int, std::vector<KeptObservation>> kept_observations;
   // The recorded frames of the triangulation window with their observations of tracks that had
   // no point yet: a point triangulated later gets their rays.
   struct RecentFrame {
@@ -266,6 +282,7 @@ struct Tracker::Impl {
     pending.clear();
     frame_stamps.clear();
     recent_frames.clear();
+    kept_observations.clear();
   }
   // The first keyframe of the triangulation window of keyframe k.
   int TriangulationWindowBegin(int k) const {
@@ -751,6 +768,17 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   }
   result.status += decision.reason;
   if (decision.decision != KeyframeDecision::kKeyframe) {
+    if (options.keep_frame_observations) {
+      std::vector<KeptObservation>& kept = kept_observations[num_frames - 1];
+      kept.clear();
+      const auto keep = [&](int j) {
+        const TrackObservation& o = observations[j];
+        kept.push_back({o.track, o.camera, o.bearing.cast<float>()});
+      };
+      for (size_t k = 0; k < bearings.size(); ++k)
+        if (ransac.inlier_mask[k]) keep(observation_index[k]);
+      for (int j : reobserved) keep(j);
+    }
     if (options.frame_ray_step > 0 && ++tracked_since_keyframe % options.frame_ray_step == 0 &&
         MovedSinceLastRays(world_from_rig)) {
       std::vector<int> of_map_points = reobserved;
@@ -1397,6 +1425,62 @@ bool Tracker::TrackPosition(int track, Eigen::Vector3d* position) const {
 }
 
 Tracker::Timings Tracker::StageTimings() const { return impl_->timings; }
+
+FramePoseRefinement Tracker::RefineFramePose(int frame, const Rigid3d& world_from_rig,
+                                             const FramePoseRefinementOptions& options) const {
+  ThrowIfInvalid(options.Check(), "FramePoseRefinementOptions");
+  const Impl& m = *impl_;
+  FramePoseRefinement refinement;
+  refinement.world_from_rig = world_from_rig;
+  const auto kept = m.kept_observations.find(frame);
+  if (kept == m.kept_observations.end()) return refinement;
+  BundleAdjustmentProblem problem;
+  problem.keyframes.push_back({world_from_rig, false});
+  std::unordered_map<int, int> problem_point;  // map point → index in the problem
+  for (const Impl::KeptObservation& o : kept->second) {
+    const auto it = m.track_to_point.find(o.track);
+    if (it == m.track_to_point.end() || !m.points[it->second].alive) continue;
+    const auto [point, added] =
+        problem_point.emplace(it->second, static_cast<int>(problem.points_in_world.size()));
+    if (added) problem.points_in_world.push_back(m.points[it->second].position);
+    problem.observations.push_back({0, o.camera, point->second, o.bearing.cast<double>()});
+  }
+  refinement.observations = static_cast<int>(problem.observations.size());
+  if (refinement.observations < options.min_inliers) return refinement;
+  problem.point_fixed.assign(problem.points_in_world.size(), 1);
+  BundleAdjustmentOptions ba_options = m.options.bundle_adjustment;
+  ba_options.mode = m.options.central ? BundleAdjustmentOptions::Mode::kCentral
+                                      : BundleAdjustmentOptions::Mode::kNonCentral;
+  ba_options.estimate_offset_scale = false;
+  ba_options.linear_solver = BundleAdjustmentOptions::LinearSolver::kDenseSchur;
+  ba_options.max_iterations = options.max_iterations;
+  ba_options.num_threads = 1;
+  const BundleAdjustmentSummary summary = LocalBundleAdjust(m.rig, ba_options, &problem);
+  if (!summary.success) return refinement;
+  refinement.inliers = static_cast<int>(problem.observations.size());
+  const Rigid3d& refined = problem.keyframes[0].world_from_rig;
+  double before = 0.0, after = 0.0;
+  for (const BundleAdjustmentObservation& o : problem.observations) {
+    const Eigen::Vector3d& position = problem.points_in_world[o.point];
+    const double angle_before =
+        ObservationAngle(m.rig, ba_options.mode, world_from_rig, position, o.camera, o.bearing);
+    const double angle_after =
+        ObservationAngle(m.rig, ba_options.mode, refined, position, o.camera, o.bearing);
+    before += angle_before * angle_before;
+    after += angle_after * angle_after;
+  }
+  if (refinement.inliers > 0) {
+    refinement.rms_angle_before = std::sqrt(before / refinement.inliers);
+    refinement.rms_angle_after = std::sqrt(after / refinement.inliers);
+  }
+  if (refinement.inliers < options.min_inliers ||
+      refinement.inliers < options.min_inlier_share * refinement.observations ||
+      refinement.rms_angle_after > refinement.rms_angle_before)
+    return refinement;
+  refinement.refined = true;
+  refinement.world_from_rig = refined;
+  return refinement;
+}
 
 void Tracker::Finish() { impl_->FinalizeUpTo(static_cast<int>(impl_->keyframes.size())); }
 

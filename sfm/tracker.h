@@ -145,6 +145,10 @@ struct TrackerOptions {
   // order; radians, 0: all of them). Closer rays carve nearly the same cells (docs/figures.md
   // F34: 1 degree keeps the surface's figures with a fifth fewer rays).
   double frame_ray_min_angle = 1.0 * M_PI / 180.0;
+  // Each tracked frame that is not a keyframe keeps its observations of map points (the
+  // resection's inliers and the agreeing re-observations), so that RefineFramePose can pose it
+  // again against the map as it is later (after the final adjustment). false: none kept.
+  bool keep_frame_observations = false;
 
   std::string Check() const;
 };
@@ -162,6 +166,27 @@ struct FrameResult {
   int inliers = 0;
   int reobserved = 0;  // observations the map-point search gave a map point (new or re-labelled)
   std::string status;  // why not tracked, or what happened
+};
+
+// Tracker::RefineFramePose: the refined pose is taken when at least min_inliers and at least
+// min_inlier_share of the frame's observations of live points stay inliers of the adjustment
+// (within bundle_adjustment.max_outlier_angle) and their RMS angle is not larger than from the
+// starting pose.
+struct FramePoseRefinementOptions {
+  int min_inliers = 15;
+  double min_inlier_share = 0.7;
+  int max_iterations = 20;
+
+  std::string Check() const;
+};
+
+struct FramePoseRefinement {
+  bool refined = false;  // false: the starting pose is kept (world_from_rig is that pose)
+  Rigid3d world_from_rig;
+  int observations = 0;  // the frame's kept observations of points still alive
+  int inliers = 0;       // of them, those the adjustment kept
+  // RMS angle over the inliers from the starting pose and from the refined one (radians).
+  double rms_angle_before = 0.0, rms_angle_after = 0.0;
 };
 
 struct FinalizedRay {
@@ -290,6 +315,14 @@ class Tracker {
   // merge_angle; *points_merged, if given, counts them).
   BundleAdjustmentSummary GlobalBundleAdjust(bool true_offsets = false, double merge_angle = 0.0,
                                              int* points_merged = nullptr);
+  // A motion-only adjustment of tracked frame `frame` (not a keyframe; indices count the frames
+  // given to AddFrame) from world_from_rig against the current map: the rig pose alone moves,
+  // the points and keyframes stay, on the observations the frame kept
+  // (TrackerOptions::keep_frame_observations), in the tracker's mode (central or the true
+  // offsets) with the bundle adjustment's robust loss. Not refined when the frame kept none, or
+  // the adjustment does not pass `options`.
+  FramePoseRefinement RefineFramePose(int frame, const Rigid3d& world_from_rig,
+                                      const FramePoseRefinementOptions& options = {}) const;
   // The keyframes finalised so far, rebuilt from the current map (after a correction), in order.
   // Each point's rays are those of keyframes up to the one that handed it over (the surface's
   // contract, docs/design.md §7); with all_rays, every keyframe that observes it (its complete

@@ -66,6 +66,9 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "Before the final adjustment, fuse the points that one point fits within this "
                    "angle (radians; 0: none)")
       ->capture_default_str();
+  command->add_flag("!--no-final-frame-refinement", o->sfm.final_frame_refinement,
+                    "Frames between keyframes keep their pose between their keyframes (default: "
+                    "each posed again against the final map)");
   command->add_flag("!--no-frames-between-keyframes", o->sfm.frame_poses_between_keyframes,
                     "A tracked frame follows only the keyframe it was tracked from (default: "
                     "both keyframes around it)");

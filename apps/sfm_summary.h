@@ -16,7 +16,8 @@ struct SfmOutputs;
 // frames_skipped, skipped, warnings, frames_tracked, frames_not_tracked, untracked_runs,
 // keyframes, points, loop_closure(s) (one object per closure; `replay_seconds[i]` and
 // `replay_keyframes[i]` add the surface's replay of closure i when given), colmap_*,
-// final_bundle_adjustment, seconds, frames_per_second, sfm_seconds and stage_seconds.
+// final_bundle_adjustment, final_frame_refinement, seconds, frames_per_second, sfm_seconds and
+// stage_seconds.
 nlohmann::json SfmSummaryJson(const Drive& drive, const SfmRunResult& run,
                               const SfmOutputs& outputs, bool central,
                               const std::vector<double>& replay_seconds = {},

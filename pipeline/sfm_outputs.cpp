@@ -79,6 +79,7 @@ SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
   stats.load_seconds = run.load_seconds;
   stats.loop_closure_seconds = run.loop_closure_seconds;
   stats.final_bundle_adjustment_seconds = run.final_bundle_adjustment_seconds;
+  stats.final_frame_refinement_seconds = run.final_frame_refinement_seconds;
   stats.final_ba_rms_angle_before_deg = run.final_rms_angle_before * 180.0 / M_PI;
   stats.final_ba_rms_angle_after_deg = run.final_rms_angle_after * 180.0 / M_PI;
   stats.queue_wait_seconds = options.queue_wait_seconds;

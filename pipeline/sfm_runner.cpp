@@ -40,6 +40,26 @@ bool FinalKeyframePose(const SfmRunResult& run, int keyframe, Rigid3d* world_fro
   return true;
 }
 
+// The tracker's options of a run: the frames keep their observations for the final refinement.
+TrackerOptions RunnerTrackerOptions(const SfmRunnerOptions& options) {
+  TrackerOptions tracker = options.tracker;
+  if (options.final_frame_refinement) tracker.keep_frame_observations = true;
+  return tracker;
+}
+
+// A tracked row's pose from its keyframes' final poses (see TrackedFramePoses).
+Rigid3d BlendedFramePose(const SfmRunResult& run, const SfmFrameRow& row) {
+  Rigid3d world_from_reference, world_from_next;
+  if (!FinalKeyframePose(run, row.reference_keyframe, &world_from_reference))
+    return row.result.world_from_rig;
+  const Rigid3d from_reference = world_from_reference * row.keyframe_from_rig;
+  if (!FinalKeyframePose(run, row.next_keyframe, &world_from_next)) return from_reference;
+  const Rigid3d from_next = world_from_next * row.next_keyframe_from_rig;
+  const double w = row.next_keyframe_weight;
+  return Rigid3d(from_reference.rotation.slerp(w, from_next.rotation),
+                 (1.0 - w) * from_reference.translation + w * from_next.translation);
+}
+
 }  // namespace
 
 std::string SfmRunnerOptions::Check() const {
@@ -55,6 +75,8 @@ std::string SfmRunnerOptions::Check() const {
     return "usable_tracked_frames_share: expected a share in [0, 1]";
   if (!(final_bundle_adjustment_merge_angle >= 0.0 && final_bundle_adjustment_merge_angle < 0.1))
     return "final_bundle_adjustment_merge_angle: expected 0 (none) or an angle below 0.1 rad";
+  if (const std::string check = final_frame_refinement_checks.Check(); !check.empty())
+    return "final_frame_refinement_checks." + check;
   return {};
 }
 
@@ -117,7 +139,7 @@ struct SfmRunner::Impl {
         options(options_),
         callbacks(callbacks_),
         builder(rig_, options_.tracks),
-        tracker(rig_, options_.tracker) {
+        tracker(rig_, RunnerTrackerOptions(options_)) {
     if (options.loop_closure) closer = std::make_unique<LoopCloser>(rig, options.loop);
   }
 
@@ -208,6 +230,36 @@ struct SfmRunner::Impl {
     for (FinalizedKeyframe& keyframe : result.keyframes)
       keyframe.frame = InputFrame(keyframe.frame);
     if (callbacks.map_corrected) callbacks.map_corrected(result.keyframes);
+  }
+
+  // SfmRunnerOptions::final_frame_refinement, on the final map.
+  void RefineFramePoses() {
+    const auto start = Clock::now();
+    double rms_before = 0.0, rms_after = 0.0;
+    for (SfmFrameRow& row : result.frames) {
+      row.pose_refined = false;
+      if (!row.result.tracked || row.result.keyframe) continue;
+      const auto given = std::lower_bound(input_frames.begin(), input_frames.end(), row.frame);
+      if (given == input_frames.end() || *given != row.frame) continue;
+      ++result.frames_refinement_tried;
+      const FramePoseRefinement refinement = tracker.RefineFramePose(
+          static_cast<int>(given - input_frames.begin()), BlendedFramePose(result, row),
+          options.final_frame_refinement_checks);
+      if (!refinement.refined) continue;
+      row.pose_refined = true;
+      row.refined_world_from_rig = refinement.world_from_rig;
+      ++result.frames_refined;
+      rms_before += refinement.rms_angle_before;
+      rms_after += refinement.rms_angle_after;
+    }
+    result.final_frame_refinement_seconds = SecondsSince(start);
+    const double refined = static_cast<double>(std::max<size_t>(1, result.frames_refined));
+    spdlog::info(
+        "sfm: {} of {} frames between keyframes refined against the final map in {:.2f} s: mean "
+        "RMS angle {:.4f} -> {:.4f} degrees",
+        result.frames_refined, result.frames_refinement_tried,
+        result.final_frame_refinement_seconds, rms_before / refined * 180.0 / M_PI,
+        rms_after / refined * 180.0 / M_PI);
   }
 
   const Rig& rig;
@@ -370,6 +422,7 @@ SfmRunResult SfmRunner::Finish() {
       spdlog::warn("sfm: the final bundle adjustment failed; the map is kept as it was");
     }
   }
+  if (s.options.final_frame_refinement && s.tracker.Initialised()) s.RefineFramePoses();
   result.model_keyframes = s.tracker.FinalizedSnapshot(/*all_rays=*/true);
   for (FinalizedKeyframe& keyframe : result.model_keyframes)
     keyframe.frame = s.InputFrame(keyframe.frame);
@@ -445,21 +498,8 @@ std::vector<SfmFramePose> TrackedFramePoses(const SfmRunResult& run) {
   std::vector<SfmFramePose> poses;
   for (const SfmFrameRow& row : run.frames) {
     if (!row.result.tracked) continue;
-    Rigid3d world_from_reference, world_from_next;
-    if (!FinalKeyframePose(run, row.reference_keyframe, &world_from_reference)) {
-      poses.push_back({row.frame, row.result.world_from_rig});
-      continue;
-    }
-    const Rigid3d from_reference = world_from_reference * row.keyframe_from_rig;
-    if (FinalKeyframePose(run, row.next_keyframe, &world_from_next)) {
-      const Rigid3d from_next = world_from_next * row.next_keyframe_from_rig;
-      const double w = row.next_keyframe_weight;
-      poses.push_back(
-          {row.frame, Rigid3d(from_reference.rotation.slerp(w, from_next.rotation),
-                              (1.0 - w) * from_reference.translation + w * from_next.translation)});
-    } else {
-      poses.push_back({row.frame, from_reference});
-    }
+    poses.push_back(
+        {row.frame, row.pose_refined ? row.refined_world_from_rig : BlendedFramePose(run, row)});
   }
   return poses;
 }

@@ -66,6 +66,14 @@ struct SfmRunnerOptions {
   // from alone, which carries it rigidly, so a change of the map's scale after it was tracked
   // (non-central mode, where the offsets set the scale) moves it off its keyframes.
   bool frame_poses_between_keyframes = true;
+  // After the final adjustment (at the end of the input when there is none): each tracked frame
+  // that is not a keyframe is posed again against the final map, from its pose between its
+  // keyframes, by a motion-only adjustment of the rig on the observations of map points it was
+  // tracked with (Tracker::RefineFramePose, its checks in final_frame_refinement_checks); a
+  // frame that does not pass them keeps that pose. frame_poses.tum then has the keyframes'
+  // accuracy (docs/figures.md F39).
+  bool final_frame_refinement = true;
+  FramePoseRefinementOptions final_frame_refinement_checks;
 
   // "" or the first bad field ("tracker.keyframes.min_tracked_share: expected ...").
   std::string Check() const;
@@ -91,12 +99,17 @@ struct SfmFrameRow {
   int next_keyframe = -1;
   Rigid3d next_keyframe_from_rig;
   double next_keyframe_weight = 0.0;
+  // SfmRunnerOptions::final_frame_refinement: the frame's pose refined against the final map
+  // (world_from_rig), which TrackedFramePoses then gives.
+  bool pose_refined = false;
+  Rigid3d refined_world_from_rig;
 };
 
-// world_from_rig of every tracked frame: its reference keyframe's final pose times the
-// relative pose it was tracked with, blended with the pose relative to the next keyframe when
-// the row has one (positions linearly, rotations by slerp, by next_keyframe_weight), so that the
-// frame follows a change of scale between its keyframes (for frame_poses.tum).
+// world_from_rig of every tracked frame: its refined pose when it has one
+// (SfmFrameRow::pose_refined), else its reference keyframe's final pose times the relative pose
+// it was tracked with, blended with the pose relative to the next keyframe when the row has one
+// (positions linearly, rotations by slerp, by next_keyframe_weight), so that the frame follows a
+// change of scale between its keyframes (for frame_poses.tum).
 struct SfmFramePose {
   size_t frame = 0;
   Rigid3d world_from_rig;
@@ -162,6 +175,10 @@ struct SfmRunResult {
   // (radians) before and after it; 0 when it did not run.
   double final_bundle_adjustment_seconds = 0.0;
   double final_rms_angle_before = 0.0, final_rms_angle_after = 0.0;
+  // SfmRunnerOptions::final_frame_refinement: its time, the frames it tried (tracked, not
+  // keyframes) and those whose refined pose was taken.
+  double final_frame_refinement_seconds = 0.0;
+  size_t frames_refinement_tried = 0, frames_refined = 0;
   double seconds = 0.0;
 };
 

@@ -35,6 +35,7 @@ std::string SfmStagesCsv(const SfmStats& s) {
       {"bundle_adjustment", s.back.bundle_adjustment},
       {"loop_closure", s.loop_closure_seconds},
       {"final_bundle_adjustment", s.final_bundle_adjustment_seconds},
+      {"final_frame_refinement", s.final_frame_refinement_seconds},
       {"queue_wait", s.queue_wait_seconds}};
   double timed = 0.0;
   for (const auto& stage : stages) timed += stage.second;

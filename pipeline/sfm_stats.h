@@ -36,6 +36,7 @@ struct SfmStats {
   double load_seconds = 0.0;                     // the SfM waiting for a frame's images
   double loop_closure_seconds = 0.0;             // detection, correction, global adjustment
   double final_bundle_adjustment_seconds = 0.0;  // when the drive ended
+  double final_frame_refinement_seconds = 0.0;   // the frames posed again on the final map
   // RMS angle of the observations (degrees) before and after that adjustment; 0: it did not run.
   double final_ba_rms_angle_before_deg = 0.0, final_ba_rms_angle_after_deg = 0.0;
   double queue_wait_seconds = 0.0;  // the SfM blocked on a full surface queue (reconstruct)

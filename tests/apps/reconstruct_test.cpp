@@ -229,9 +229,9 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
   const double sfm_seconds = summary["sfm_seconds"].get<double>();
   EXPECT_NEAR(sfm_stages["total"], sfm_seconds, 1e-4 * sfm_seconds);
   double stages_sum = 0.0;
-  for (const char* stage :
-       {"load_wait", "detect", "match", "resect", "triangulate", "map_search",
-        "bundle_adjustment", "loop_closure", "final_bundle_adjustment", "queue_wait", "other"}) {
+  for (const char* stage : {"load_wait", "detect", "match", "resect", "triangulate", "map_search",
+                            "bundle_adjustment", "loop_closure", "final_bundle_adjustment",
+                            "final_frame_refinement", "queue_wait", "other"}) {
     ASSERT_EQ(sfm_stages.count(stage), 1u) << stage;
     EXPECT_GE(sfm_stages[stage], 0.0) << stage;
     stages_sum += sfm_stages[stage];

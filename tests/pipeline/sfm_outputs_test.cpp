@@ -211,12 +211,13 @@ TEST(SfmStats, CountsFramesAndWritesBothFiles) {
     EXPECT_NE(summary.find(row), std::string::npos) << row << " in\n" << summary;
   const std::vector<std::string> stages =
       testing::SplitText(testing::ReadTextFile(dir.path() / "sfm_stages.csv"));
-  ASSERT_EQ(stages.size(), 13u);
+  ASSERT_EQ(stages.size(), 14u);
   EXPECT_EQ(stages[0], "stage,seconds,ms_per_frame");
   EXPECT_EQ(stages[2], "detect,1,250");
   EXPECT_EQ(stages[6], "map_search,0.5,125");
   EXPECT_EQ(stages[9], "final_bundle_adjustment,0,0");
-  EXPECT_EQ(stages[11], "other,0.5,125");  // total - detect - map_search
+  EXPECT_EQ(stages[10], "final_frame_refinement,0,0");
+  EXPECT_EQ(stages[12], "other,0.5,125");  // total - detect - map_search
   EXPECT_EQ(stages.back(), "total,2,500");
 }
 

@@ -59,6 +59,12 @@ TEST(SfmRunnerOptions, BadOptionsAreReportedWithTheFieldInRelease) {
   options = SfmRunnerOptions();
   options.max_frames = -1;
   EXPECT_THROW(RunSfm(rig, BlackFrames(rig, 2), options), std::invalid_argument);
+  options = SfmRunnerOptions();
+  options.final_frame_refinement_checks.min_inlier_share = 1.5;
+  EXPECT_NE(options.Check().find("final_frame_refinement_checks.min_inlier_share"),
+            std::string::npos)
+      << options.Check();
+  EXPECT_THROW((SfmRunner{rig, options}), std::invalid_argument);
 }
 
 TEST(SfmRunner, BlackFramesNeverInitialiseAndEveryFrameHasItsRow) {

@@ -205,7 +205,7 @@ TEST_F(SfmCommandShortDrive, NonCentralFramePosesFollowTheirKeyframes) {
 
 // Non-central mode on the first 60 frames: the frames between keyframes posed again against the
 // final map (the default) are as accurate as the keyframes, and more than their pose between
-// their keyframes (`--no-final-frame-refinement`). Measured, four runs each (docs/figures.md
+// their keyframes (`--no-final-frame-refinement`). Measured, seven runs each (docs/figures.md
 // F39): frames 0.46 to 0.57 cm with keyframes 0.45 to 0.59 cm; without, frames 0.66 to 0.91 cm,
 // 1.1 to 1.6 times the keyframes'.
 TEST_F(SfmCommandShortDrive, NonCentralFramesRefinedOnTheFinalMapAreAsAccurateAsKeyframes) {

@@ -223,6 +223,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       {"surface_ms_median", Quantile(surface_ms, 0.5)},
       {"surface_ms_p95", Quantile(surface_ms, 0.95)},
       {"queue_capacity", o.pipeline.queue_capacity},
+      {"surface_thread_nice", o.pipeline.surface_thread_nice},
       {"queue_max_size", result.queue_max_size},
       {"queue_blocked_pushes", result.queue_blocked_pushes},
       {"queue_blocked_seconds", result.queue_blocked_seconds},
@@ -327,6 +328,11 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
   command
       ->add_option("--queue", o->pipeline.queue_capacity,
                    "Keyframes that may wait between the SfM and the surface")
+      ->capture_default_str();
+  command
+      ->add_option("--surface-nice", o->pipeline.surface_thread_nice,
+                   "The surface thread runs this much nicer than the SfM (0 to 19; 0: the same "
+                   "priority): the SfM sets the pace, the surface keeps up in the time left")
       ->capture_default_str();
   command
       ->add_option("--loop-replay", o->loop_replay,

@@ -170,8 +170,11 @@ cv::Mat ReadImage8Bit(const std::filesystem::path& file, int flags, const Camera
   }
   cv::Mat image;
   // A drive's plain 8-bit grey PNGs (the common case) decode here about twice as fast, to the
-  // same pixels; every other file goes through OpenCV.
-  if (!(flags == cv::IMREAD_GRAYSCALE && DecodePlainGreyPng(data, &image))) {
+  // same pixels, whether grey is asked for or the file's own channels are (LoadRgb, which expands
+  // them); every other file goes through OpenCV.
+  const bool grey_is_the_answer =
+      flags == cv::IMREAD_GRAYSCALE || flags == (cv::IMREAD_ANYCOLOR | cv::IMREAD_ANYDEPTH);
+  if (!(grey_is_the_answer && DecodePlainGreyPng(data, &image))) {
     image.release();
     try {
       const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8U, const_cast<char*>(data.data()));

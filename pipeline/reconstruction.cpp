@@ -4,14 +4,22 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <exception>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
 #include <unordered_map>
+
+#ifdef __linux__
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+#endif
 
 #include "calib/error.h"
 #include "pipeline/bounded_queue.h"
@@ -24,6 +32,8 @@ std::string PipelineOptions::Check() const {
        {std::pair<const char*, std::string>{"sfm", sfm.Check()}, {"sculptor", sculptor.Check()}})
     if (!check.empty()) return std::string(name) + "." + check;
   if (queue_capacity < 1) return "queue_capacity: expected at least 1";
+  if (surface_thread_nice < 0 || surface_thread_nice > 19)
+    return "surface_thread_nice: expected 0 to 19";
   if (snapshot_every < 0) return "snapshot_every: expected 0 (none) or more";
   if (!(progress_period > 0.0)) return "progress_period: expected a positive number of seconds";
   return {};
@@ -64,6 +74,21 @@ struct QueuedKeyframe {
   Clock::time_point pushed;
 };
 
+// Makes the calling thread `increment` nicer than it is (Linux: niceness is per thread), up to
+// 19; a debug line when the system refuses (the run goes on at the same priority).
+void LowerThisThreadPriority(int increment) {
+  if (increment <= 0) return;
+#ifdef __linux__
+  const auto thread = static_cast<id_t>(syscall(SYS_gettid));
+  errno = 0;
+  const int current = getpriority(PRIO_PROCESS, thread);
+  if (current == -1 && errno != 0) return;
+  if (setpriority(PRIO_PROCESS, thread, std::min(19, current + increment)) != 0)
+    spdlog::debug("reconstruct: the surface thread's priority was not lowered: {}",
+                  std::strerror(errno));
+#endif
+}
+
 }  // namespace
 
 PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
@@ -103,6 +128,7 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
   });
 
   std::thread surface_thread([&] {
+    LowerThisThreadPriority(options.surface_thread_nice);
     try {
       auto sculptor = std::make_unique<IncrementalSculptor>(options.sculptor);
       std::unordered_map<uint32_t, double> queue_ms;

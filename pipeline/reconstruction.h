@@ -37,6 +37,11 @@ struct PipelineOptions {
   // keyframes the SfM makes while the surface replays a corrected map (a replay item, the
   // whole map, is ~10 MB there).
   int queue_capacity = 32;
+  // The surface thread runs this much nicer than the process (Linux thread niceness, 0 to 19;
+  // 0: the SfM's priority). The SfM thread sets the pace while the surface keeps up with the
+  // queue; when both want a core the SfM gets it, and a surface that falls behind still gets the
+  // cores whenever the SfM waits (a full queue, the end of the input). docs/figures.md F40.
+  int surface_thread_nice = 10;
   int snapshot_every = 0;        // snapshot callback every K sculpted keyframes; 0: none
   double progress_period = 2.0;  // seconds between two progress callbacks
 

@@ -205,6 +205,7 @@ void RefineCornersSubpixel(const cv::Mat& image, const HarrisOptions& options,
   // Per window pixel: the Gauss weight m, and m times the pixel's offset from the centre.
   const int area = win * win;
   Eigen::ArrayXf mask(area), mask_px(area), mask_py(area), gx(area), gy(area);
+  Eigen::ArrayXf gxx(area), gxy(area), gyy(area);  // assigned in place: no allocation per step
   std::vector<float> buffer(padded * padded);
   for (int i = 0; i < win; ++i) {
     const float y = static_cast<float>(i - half) / half;
@@ -235,7 +236,9 @@ void RefineCornersSubpixel(const cv::Mat& image, const HarrisOptions& options,
           gy[k] = row[j + padded] - row[j - padded];
         }
       }
-      const Eigen::ArrayXf gxx = gx * gx, gxy = gx * gy, gyy = gy * gy;
+      gxx = gx * gx;
+      gxy = gx * gy;
+      gyy = gy * gy;
       const double a = (mask * gxx).sum(), b = (mask * gxy).sum(), c = (mask * gyy).sum();
       const double bb1 = (mask_px * gxx + mask_py * gxy).sum();
       const double bb2 = (mask_px * gxy + mask_py * gyy).sum();

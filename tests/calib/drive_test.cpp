@@ -258,6 +258,35 @@ TEST(Drive, ColourLoadsAsGreyAndSixteenBitIsRefused) {
       << message;
 }
 
+// LoadRgb: a grey PNG (the fast decoder's case) gives OpenCV's pixels in all three channels; a
+// colour PNG keeps its colours, in RGB order.
+TEST(Drive, RgbOfGreyAndColourPngsIsOpenCvsDecode) {
+  TempDir dir;
+  const auto folder = MakeDrive(dir, {}, {});
+  cv::Mat grey(kHeight, kWidth, CV_8UC1);
+  cv::randu(grey, 0, 256);
+  WriteImage(folder / "images" / "left" / "1.png", grey);
+  WriteImage(folder / "images" / "right" / "1.png",
+             cv::Mat(kHeight, kWidth, CV_8UC3, cv::Scalar(10, 120, 230)));  // BGR
+  const Drive drive = Drive::Open(folder);
+  const cv::Mat rgb = drive.LoadRgb(0, 0);
+  ASSERT_EQ(rgb.type(), CV_8UC3);
+  ASSERT_EQ(rgb.size(), grey.size());
+  const cv::Mat decoded =
+      cv::imread((folder / "images" / "left" / "1.png").string(), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(decoded.type(), CV_8UC1);
+  int differing = 0;
+  for (int y = 0; y < kHeight; ++y)
+    for (int x = 0; x < kWidth; ++x) {
+      const cv::Vec3b& v = rgb.at<cv::Vec3b>(y, x);
+      const uint8_t expected = decoded.at<uint8_t>(y, x);
+      differing += (v[0] != expected || v[1] != expected || v[2] != expected) ? 1 : 0;
+    }
+  EXPECT_EQ(differing, 0);
+  const cv::Vec3b colour = drive.LoadRgb(0, 1).at<cv::Vec3b>(5, 7);
+  EXPECT_EQ(colour, cv::Vec3b(230, 120, 10));
+}
+
 // frames.csv: a frame's timestamp is the mean of its cameras' rows; a drive without it has
 // none; a bad number, a frame without a row or timestamps that do not increase are bad input
 // naming the file (and the line when there is one).

@@ -1,0 +1,61 @@
+#include "pipeline/reconstruction.h"
+
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <string>
+
+#include "calib/drive.h"
+#include "tests/apps/short_drive.h"
+
+namespace omni {
+namespace {
+
+int ThisThreadNiceness() {
+  return getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)));
+}
+
+// The niceness of the surface thread, read in the snapshot callback (which runs on it) of a
+// pipeline run on the first frames of the short drive; -100 when no snapshot came.
+int SurfaceThreadNiceness(const Drive& drive, int surface_thread_nice) {
+  PipelineOptions options;
+  options.sfm.max_frames = 40;
+  options.snapshot_every = 1;
+  options.surface_thread_nice = surface_thread_nice;
+  std::atomic<int> niceness{-100};
+  PipelineCallbacks callbacks;
+  callbacks.snapshot = [&niceness](const KeyframeId&, const TriangleMesh&) {
+    niceness = ThisThreadNiceness();
+  };
+  RunPipeline(drive, options, callbacks);
+  return niceness;
+}
+
+// The surface thread runs surface_thread_nice nicer than the thread that started the pipeline
+// (capped at 19), the SfM's; 0 leaves it at the same priority.
+TEST(PipelineShortDrive, TheSurfaceThreadRunsNicerThanTheSfm) {
+  std::string error;
+  const std::filesystem::path folder = testing::ShortDrive(&error);
+  ASSERT_FALSE(folder.empty()) << error;
+  const Drive drive = Drive::Open(folder);
+  const int base = ThisThreadNiceness();
+  EXPECT_EQ(SurfaceThreadNiceness(drive, 0), base);
+  EXPECT_EQ(SurfaceThreadNiceness(drive, 5), std::min(19, base + 5));
+  EXPECT_EQ(ThisThreadNiceness(), base);  // the caller's own priority is untouched
+}
+
+TEST(PipelineOptions, ChecksTheSurfaceThreadNiceness) {
+  PipelineOptions options;
+  EXPECT_EQ(options.Check(), "");
+  options.surface_thread_nice = 20;
+  EXPECT_NE(options.Check().find("surface_thread_nice"), std::string::npos);
+  options.surface_thread_nice = -1;
+  EXPECT_NE(options.Check().find("surface_thread_nice"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace omni

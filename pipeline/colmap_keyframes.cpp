@@ -3,9 +3,11 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <map>
+#include <optional>
 #include <string>
 #include <unordered_map>
 
+#include "calib/error.h"
 #include "pipeline/world_up.h"
 
 namespace omni {
@@ -16,10 +18,44 @@ struct Image {
   Eigen::Vector3d up;  // the image's up axis (−y of the camera) in the world
 };
 
-// The frame an image belongs to: its name without the camera folder.
-std::string FrameKey(const std::string& name) {
+// How an image's name places it in a rig: "cam3/000123.png" (the camera's folder, the frame's
+// file name) or "f000123_c3.png" (one folder, the frame and the camera index in the name).
+struct ImageName {
+  std::string frame_key;      // the name without its camera: "000123.png", "f000123.png"
+  std::string frame_name;     // "000123"
+  std::string camera_folder;  // "cam3"; empty for the f<frame>_c<index> names
+  int camera_index = -1;      // 3 for "f000123_c3.png"; -1 for the folder names
+};
+
+ImageName ParseImageName(const std::string& name) {
   const std::filesystem::path path(name);
-  return (path.parent_path().parent_path() / path.filename()).generic_string();
+  const std::string stem = path.stem().string();
+  ImageName parsed;
+  const size_t c = stem.rfind("_c");
+  if (stem.size() > 1 && stem[0] == 'f' && c != std::string::npos && c > 1 && c + 2 < stem.size() &&
+      std::all_of(stem.begin() + static_cast<long>(c) + 2, stem.end(),
+                  [](char ch) { return ch >= '0' && ch <= '9'; }) &&
+      stem.size() - c - 2 <= 6) {
+    parsed.frame_name = stem.substr(1, c - 1);
+    parsed.camera_index = std::stoi(stem.substr(c + 2));
+    parsed.frame_key = (path.parent_path() / ("f" + parsed.frame_name + path.extension().string()))
+                           .generic_string();
+    return parsed;
+  }
+  parsed.frame_name = stem;
+  parsed.camera_folder = path.parent_path().filename().string();
+  parsed.frame_key = (path.parent_path().parent_path() / path.filename()).generic_string();
+  return parsed;
+}
+
+std::string FrameKey(const std::string& name) { return ParseImageName(name).frame_key; }
+
+// The frames of a model: frame key -> indices into model.images, ordered by key.
+std::map<std::string, std::vector<size_t>> FramesOf(const ColmapModel& colmap) {
+  std::map<std::string, std::vector<size_t>> frames;
+  for (size_t i = 0; i < colmap.images.size(); ++i)
+    frames[FrameKey(colmap.images[i].name)].push_back(i);
+  return frames;
 }
 
 }  // namespace
@@ -42,13 +78,15 @@ std::vector<SurfaceKeyframe> ColmapKeyframes(const ColmapModel& colmap,
                                              Eigen::Vector3d* world_up) {
   std::unordered_map<uint32_t, Image> images;
   std::map<std::string, std::vector<uint32_t>> frames;  // frame key -> image ids
+  for (const auto& [frame, indices] : FramesOf(colmap)) {
+    for (size_t i : indices) frames[frame].push_back(colmap.images[i].id);
+  }
   for (const ColmapImage& colmap_image : colmap.images) {
     const Eigen::Matrix3d r = colmap_image.cam_from_world.rotation.toRotationMatrix();
     Image image;
     image.centre = colmap_image.cam_from_world.Center();
     image.up = -r.row(1).transpose();
     images.emplace(colmap_image.id, image);
-    frames[FrameKey(colmap_image.name)].push_back(colmap_image.id);
   }
   if (world_up) {
     std::vector<Eigen::Vector3d> centres, ups;
@@ -87,6 +125,83 @@ std::vector<SurfaceKeyframe> ColmapKeyframes(const ColmapModel& colmap,
     keyframes[latest].points.push_back(std::move(point));
   }
   return keyframes;
+}
+
+ColmapRigPoses ColmapKeyframeRigPoses(const ColmapModel& colmap, const Rig& rig) {
+  // Each image's rig camera.
+  std::vector<size_t> camera_of(colmap.images.size());
+  for (size_t i = 0; i < colmap.images.size(); ++i) {
+    const std::string& name = colmap.images[i].name;
+    const ImageName parsed = ParseImageName(name);
+    if (parsed.camera_index >= 0) {
+      if (static_cast<size_t>(parsed.camera_index) >= rig.cameras.size()) {
+        throw InputError(name, "",
+                         "camera index " + std::to_string(parsed.camera_index) +
+                             " is not in the rig (" + std::to_string(rig.cameras.size()) +
+                             " cameras)");
+      }
+      camera_of[i] = static_cast<size_t>(parsed.camera_index);
+    } else {
+      const std::optional<size_t> camera = rig.FindCamera(parsed.camera_folder);
+      if (!camera) {
+        throw InputError(name, "",
+                         "no rig camera is named after its folder '" + parsed.camera_folder +
+                             "' (and the name is not f<frame>_c<camera index>)");
+      }
+      camera_of[i] = *camera;
+    }
+  }
+  const std::map<std::string, std::vector<size_t>> frames = FramesOf(colmap);
+  ColmapRigPoses result;
+  // The model's scale: distances between the camera centres of a frame, model against rig.
+  double model_rig = 0.0, rig_rig = 0.0;
+  for (const auto& [frame, indices] : frames) {
+    for (size_t a = 0; a < indices.size(); ++a) {
+      for (size_t b = a + 1; b < indices.size(); ++b) {
+        const double in_rig = (rig.cameras[camera_of[indices[a]]].CenterInRig() -
+                               rig.cameras[camera_of[indices[b]]].CenterInRig())
+                                  .norm();
+        if (!(in_rig > 1e-9)) continue;
+        const double in_model = (colmap.images[indices[a]].cam_from_world.Center() -
+                                 colmap.images[indices[b]].cam_from_world.Center())
+                                    .norm();
+        model_rig += in_model * in_rig;
+        rig_rig += in_rig * in_rig;
+        ++result.camera_pairs;
+      }
+    }
+  }
+  if (rig_rig > 0.0 && model_rig > 0.0) result.model_units_per_metre = model_rig / rig_rig;
+  const double scale = result.model_units_per_metre;
+  for (const auto& [frame, indices] : frames) {
+    ColmapKeyframePose pose;
+    pose.frame_name = ParseImageName(colmap.images[indices.front()].name).frame_name;
+    pose.images = indices.size();
+    // The mean rotation (quaternions on one hemisphere, summed and normalised).
+    Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+    for (size_t i : indices) {
+      const Camera& camera = rig.cameras[camera_of[i]];
+      const Eigen::Quaterniond world_from_rig =
+          colmap.images[i].cam_from_world.rotation.conjugate() * camera.cam_from_rig.rotation;
+      Eigen::Vector4d q = world_from_rig.normalized().coeffs();
+      if (sum.dot(q) < 0.0) q = -q;
+      sum += q;
+    }
+    pose.world_from_rig.rotation = Eigen::Quaterniond(sum.normalized());
+    // The rig's centre (CentralCenterInRig, the point eval registers) in the model's units; the
+    // rig's origin at its metric offset from that centre.
+    const Eigen::Vector3d rig_centre = rig.CentralCenterInRig();
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (size_t i : indices) {
+      centre += colmap.images[i].cam_from_world.Center() -
+                pose.world_from_rig.rotation *
+                    (scale * (rig.cameras[camera_of[i]].CenterInRig() - rig_centre));
+    }
+    centre /= static_cast<double>(indices.size());
+    pose.world_from_rig.translation = centre - pose.world_from_rig.rotation * rig_centre;
+    result.keyframes.push_back(std::move(pose));
+  }
+  return result;
 }
 
 }  // namespace omni

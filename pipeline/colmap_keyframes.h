@@ -3,8 +3,10 @@
 // points3D.txt), for `omnisculpt surface --colmap` and `omnisculpt merge`. Images whose names
 // share a frame (the same file name in sibling camera folders, e.g. "cam0/000123.png" and
 // "cam1/000123.png", or "d1/images/cam0/000123.png" and "d1/images/cam1/000123.png") form one
-// keyframe, a rig frame; otherwise every image is a keyframe. Keyframes are ordered by frame
-// name: the name without its camera folder ("000123.png", "d1/images/000123.png"). A point goes to
+// keyframe, a rig frame, and so do images named f<frame>_c<camera index> in one folder
+// ("f000123_c0.png", "f000123_c1.png": docs/figures.md F33); otherwise every image is a keyframe.
+// Keyframes are ordered by frame key: the name without its camera folder ("000123.png",
+// "d1/images/000123.png") or camera suffix ("f000123.png"). A point goes to
 // the latest keyframe of its track (paper §3.3: observed by keyframes t' ≤ t) with one ray per
 // observing image, starting at that camera's centre.
 
@@ -14,6 +16,8 @@
 #include <vector>
 
 #include "calib/colmap_text.h"
+#include "calib/pose.h"
+#include "calib/rig.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -38,5 +42,31 @@ std::vector<SurfaceKeyframe> ParseColmapKeyframes(
 std::vector<SurfaceKeyframe> ColmapKeyframes(
     const ColmapModel& model, std::unordered_map<PointId, Rgb8>* point_colors = nullptr,
     Eigen::Vector3d* world_up = nullptr);
+
+// The rig pose of one keyframe of ColmapKeyframes, in the model's world and units.
+struct ColmapKeyframePose {
+  std::string frame_name;  // the frame's name in a drive: "000123" from "cam0/000123.png" or
+                           // from "f000123_c0.png"
+  Rigid3d world_from_rig;
+  size_t images = 0;  // registered images of the frame the pose is from
+};
+
+struct ColmapRigPoses {
+  std::vector<ColmapKeyframePose> keyframes;  // in the order of ColmapKeyframes
+  // The model's length unit per metre of the rig: the least-squares ratio of the distances
+  // between the camera centres of a frame in the model to those in rig.json, over every pair of
+  // registered images of a frame; 1 when no frame has two registered images of distinct centres.
+  double model_units_per_metre = 1.0;
+  size_t camera_pairs = 0;  // the pairs that measured it
+};
+
+// The rig poses of the keyframes of ColmapKeyframes(model): each image's camera is the rig camera
+// of its folder's name ("cam3/000123.png": the camera named cam3) or of its index ("f000123_c3":
+// the fourth camera of rig.json); world_from_rig's rotation is the mean over the frame's images
+// of world_from_cam · cam_from_rig; it maps the rig's centre (Rig::CentralCenterInRig, what
+// `omnisculpt eval` registers) to the mean over the images of the image's centre moved by its
+// camera's offset from that centre (scaled by model_units_per_metre). Throws InputError naming the
+// image when its camera is not in the rig or its name has no camera.
+ColmapRigPoses ColmapKeyframeRigPoses(const ColmapModel& model, const Rig& rig);
 
 }  // namespace omni

@@ -1,0 +1,52 @@
+#include "surface/advancing_front.h"
+
+#include <CGAL/Advancing_front_surface_reconstruction.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+
+#include <array>
+#include <cmath>
+#include <iterator>
+
+#include "calib/error.h"
+
+namespace omni {
+
+std::string AdvancingFrontOptions::Check() const {
+  if (!(radius_ratio_bound >= 0.0) || !std::isfinite(radius_ratio_bound))
+    return "radius_ratio_bound: expected 0 or more";
+  if (!(beta > 0.0) || !(beta < M_PI)) return "beta: expected an angle in (0, pi) radians";
+  return {};
+}
+
+TriangleMesh AdvancingFrontSurface(const std::vector<Eigen::Vector3d>& points,
+                                   const AdvancingFrontOptions& options) {
+  ThrowIfInvalid(options.Check(), "AdvancingFrontOptions");
+  using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+  TriangleMesh mesh;
+  if (points.size() < 3) return mesh;
+  std::vector<Kernel::Point_3> cgal_points;
+  cgal_points.reserve(points.size());
+  for (const Eigen::Vector3d& p : points) cgal_points.emplace_back(p.x(), p.y(), p.z());
+  std::vector<std::array<std::size_t, 3>> facets;
+  // CGAL's radius_ratio_bound 0 would drop every facet: "no bound" is an infinite one.
+  const double bound = options.radius_ratio_bound > 0.0 ? options.radius_ratio_bound : 1e300;
+  CGAL::advancing_front_surface_reconstruction(cgal_points.begin(), cgal_points.end(),
+                                               std::back_inserter(facets), bound, options.beta);
+  // Only the points in a triangle are vertices, in their input order.
+  std::vector<int> vertex_of(points.size(), -1);
+  for (const auto& facet : facets) {
+    for (std::size_t index : facet) vertex_of.at(index) = 0;
+  }
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (vertex_of[i] < 0) continue;
+    vertex_of[i] = static_cast<int>(mesh.vertices.size());
+    mesh.vertices.push_back(points[i]);
+  }
+  mesh.triangles.reserve(facets.size());
+  for (const auto& facet : facets) {
+    mesh.triangles.emplace_back(vertex_of[facet[0]], vertex_of[facet[1]], vertex_of[facet[2]]);
+  }
+  return mesh;
+}
+
+}  // namespace omni

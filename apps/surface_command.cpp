@@ -19,6 +19,8 @@
 #include "apps/commands.h"
 #include "apps/output_folder.h"
 #include "calib/atomic_file.h"
+#include "calib/colmap_text.h"
+#include "calib/drive.h"
 #include "calib/error.h"
 #include "calib/mesh_check.h"
 #include "calib/ply.h"
@@ -26,6 +28,7 @@
 #include "pipeline/colmap_keyframes.h"
 #include "pipeline/gt_keyframes.h"
 #include "pipeline/point_colors.h"
+#include "surface/advancing_front.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -33,9 +36,13 @@ namespace {
 
 struct SurfaceCommandOptions {
   std::string from_gt;
-  std::string colmap;  // a COLMAP text model folder
+  std::string colmap;        // a COLMAP text model folder
+  std::string drive;         // --colmap: the drive of the model's images (rig.json, frames.csv)
+  double frame_rate = 15.0;  // --colmap: poses.tum stamps when the drive has no frames.csv
   std::string out;
   bool force = false;
+  std::string method = "sculptor";  // or "advancing-front", the baseline on the same points
+  AdvancingFrontOptions advancing_front;
   std::string enclosing = EnclosingName(SculptorOptions().enclosing);
   bool no_batch = false;
   bool no_genus_refinement = false;  // step 6 (paper §4.6) parts switched off
@@ -51,16 +58,138 @@ double Quantile(std::vector<double> v, double q) {
   return v[std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())))];
 }
 
+// The rig poses of a COLMAP model's keyframes stamped as `omnisculpt sfm` stamps poses.tum: the
+// drive's frames.csv, else the frame's index in the drive / frame_rate.
+std::vector<StampedPose> ColmapPosesOnDrive(const ColmapModel& model, const std::string& folder,
+                                            double frame_rate) {
+  const Drive drive = Drive::Open(folder);
+  std::unordered_map<std::string, size_t> frame_of;
+  for (size_t frame = 0; frame < drive.NumFrames(); ++frame)
+    frame_of[drive.FrameName(frame)] = frame;
+  const ColmapRigPoses rig_poses = ColmapKeyframeRigPoses(model, drive.rig());
+  std::vector<StampedPose> poses;
+  for (const ColmapKeyframePose& pose : rig_poses.keyframes) {
+    const auto frame = frame_of.find(pose.frame_name);
+    if (frame == frame_of.end()) {
+      throw InputError(folder, "--drive",
+                       "the model's frame '" + pose.frame_name + "' is not a frame of the drive");
+    }
+    const double stamp = drive.HasTimestamps() ? drive.FrameTimestamp(frame->second)
+                                               : static_cast<double>(frame->second) / frame_rate;
+    poses.push_back({stamp, pose.world_from_rig});
+  }
+  spdlog::info(
+      "surface: {} keyframe rig poses from the model ({:.4f} model units per metre of the rig, "
+      "from {} camera pairs)",
+      poses.size(), rig_poses.model_units_per_metre, rig_poses.camera_pairs);
+  if (rig_poses.camera_pairs == 0) {
+    spdlog::warn(
+        "surface: no frame has two registered images: the rig's offsets are taken in "
+        "the model's units");
+  }
+  return poses;
+}
+
+// The points fed to the sculptor (points.ply), coloured when the colours are known.
+PointCloud StreamPoints(const std::vector<SurfaceKeyframe>& stream,
+                        const std::unordered_map<PointId, Rgb8>& point_colors) {
+  PointCloud points;
+  for (const SurfaceKeyframe& kf : stream) {
+    for (const SurfacePoint& point : kf.points) {
+      points.points.push_back(point.position);
+      if (point_colors.empty()) continue;
+      const auto color = point_colors.find(point.id);
+      points.colors.push_back(color != point_colors.end() ? color->second : Rgb8(128, 128, 128));
+    }
+  }
+  return points;
+}
+
+// --method advancing-front: CGAL's advancing front surface of every point of the stream (no ray,
+// no filter of the sculptor), written as surface.ply with points.ply, poses.tum and surface.json,
+// a folder `omnisculpt eval` reads (no surface_closed.ply: the mesh has a boundary).
+void WriteAdvancingFrontSurface(const SurfaceCommandOptions& o,
+                                const std::vector<SurfaceKeyframe>& stream,
+                                const std::unordered_map<PointId, Rgb8>& point_colors,
+                                const std::vector<StampedPose>& keyframe_poses,
+                                std::chrono::steady_clock::time_point start) {
+  const std::filesystem::path out(o.out);
+  OutputFolder folder(out, "surface.json", o.force, "surface");
+  // An earlier sculptor output replaced (--force): no closed surface of another method is left.
+  std::filesystem::remove(out / "surface_closed.ply");
+  std::filesystem::remove(out / "stats" / "keyframes.csv");
+  const PointCloud points = StreamPoints(stream, point_colors);
+  const auto mesh_start = std::chrono::steady_clock::now();
+  TriangleMesh mesh = AdvancingFrontSurface(points.points, o.advancing_front);
+  const double mesh_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
+  if (!points.colors.empty()) {
+    // The vertices are the points in a triangle, in order: match them back to their colours.
+    size_t next = 0;
+    for (const Eigen::Vector3d& vertex : mesh.vertices) {
+      while (next < points.points.size() && points.points[next] != vertex) ++next;
+      mesh.colors.push_back(next < points.colors.size() ? points.colors[next]
+                                                        : Rgb8(128, 128, 128));
+    }
+  }
+  WritePlyMesh(mesh, out / "surface.ply");
+  WritePlyPoints(points, out / "points.ply");
+  if (!keyframe_poses.empty()) WriteTum(keyframe_poses, out / "poses.tum");
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  const MeshCheckReport report = CheckMesh(mesh, bounded);
+  const double total_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf(
+      "surface: advancing front (radius ratio bound %.2f, beta %.2f) of %zu points: %zu "
+      "triangles on %zu vertices in %ld boundary loops, manifold with boundary %s (%.2f s, "
+      "%.2f s in all)\n  wrote %s\n",
+      o.advancing_front.radius_ratio_bound, o.advancing_front.beta, points.points.size(),
+      mesh.triangles.size(), mesh.vertices.size(), report.boundary_loops, report.ok ? "yes" : "NO",
+      mesh_s, total_s, (out / "surface.ply").c_str());
+  const nlohmann::json summary = {
+      {"input", o.colmap.empty() ? o.from_gt : o.colmap},
+      {"source", o.colmap.empty() ? "ground truth" : "colmap"},
+      {"method", "advancing-front"},
+      {"status", mesh.triangles.empty() ? "not_usable" : "usable"},
+      {"keyframes", stream.size()},
+      {"points", points.points.size()},
+      {"triangles", mesh.triangles.size()},
+      {"vertices", mesh.vertices.size()},
+      {"manifold", report.ok},
+      {"boundary_loops", report.boundary_loops},
+      {"radius_ratio_bound", o.advancing_front.radius_ratio_bound},
+      {"beta", o.advancing_front.beta},
+      {"mesh_seconds", mesh_s},
+      {"seconds", total_s},
+      {"warnings", WarningsLogged()},
+  };
+  WriteTextFileAtomically(out / "surface.json", summary.dump(2) + "\n");
+  folder.Keep();
+  if (mesh.triangles.empty()) {
+    ReportNotUsable((o.colmap.empty() ? o.from_gt : o.colmap) +
+                    ": the advancing front surface is empty (" +
+                    std::to_string(points.points.size()) + " points)");
+  }
+}
+
 void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   if (o.from_gt.empty() == o.colmap.empty()) {
     throw InputError("", "--from-gt/--colmap", "exactly one input is required");
   }
   if (o.out.empty()) throw InputError("", "--out", "an output folder is required");
+  if (!o.drive.empty() && o.colmap.empty()) throw InputError("", "--drive", "needs --colmap");
+  if (!(o.frame_rate > 0.0)) throw InputError("", "--frame-rate", "must be > 0");
   ApplyEnclosingOption(o.enclosing, &o.sculptor);
   o.sculptor.batch_init = !o.no_batch;
   if (o.no_genus_refinement) o.sculptor.genus.enabled = false;
   if (o.no_smoothing) o.sculptor.smoothing.enabled = false;
   if (o.snapshot_every < 0) throw InputError("", "--snapshot-every", "must be >= 0");
+  if (o.method != "sculptor" && o.method != "advancing-front") {
+    throw InputError("", "--method",
+                     "expected sculptor or advancing-front, got '" + o.method + "'");
+  }
+  ThrowIfInvalid(o.advancing_front.Check(), "AdvancingFrontOptions");
   ThrowIfInvalid(o.sculptor.Check(), "SculptorOptions");
   ThrowIfInvalid(o.gt.Check(), "GtKeyframeOptions");
   const auto start = std::chrono::steady_clock::now();
@@ -68,10 +197,14 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   std::vector<size_t> keyframe_frames;      // known for --from-gt only
   std::unordered_map<PointId, Rgb8> point_colors;
   Eigen::Vector3d colmap_up = Eigen::Vector3d::UnitZ();
-  const std::vector<SurfaceKeyframe> stream =
-      o.colmap.empty()
-          ? LoadGtKeyframes(o.from_gt, o.gt, nullptr, &keyframe_poses, &keyframe_frames)
-          : LoadColmapKeyframes(o.colmap, &point_colors, &colmap_up);
+  std::vector<SurfaceKeyframe> stream;
+  if (o.colmap.empty()) {
+    stream = LoadGtKeyframes(o.from_gt, o.gt, nullptr, &keyframe_poses, &keyframe_frames);
+  } else {
+    const ColmapModel model = ReadColmapModel(o.colmap);
+    stream = ColmapKeyframes(model, &point_colors, &colmap_up);
+    if (!o.drive.empty()) keyframe_poses = ColmapPosesOnDrive(model, o.drive, o.frame_rate);
+  }
   if (o.colmap.empty()) point_colors = GtPointColors(o.from_gt, stream, keyframe_frames);
   // A COLMAP world has no up axis: the ground filter's up from its cameras.
   if (!o.colmap.empty()) {
@@ -89,6 +222,10 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       gen_s);
 
   const std::filesystem::path out(o.out);
+  if (o.method == "advancing-front") {
+    WriteAdvancingFrontSurface(o, stream, point_colors, keyframe_poses, start);
+    return;
+  }
   OutputFolder folder(out, "stats/keyframes.csv", o.force, "surface");
   IncrementalSculptor sculptor(o.sculptor);
   std::vector<KeyframeStats> stats;
@@ -129,16 +266,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   // The input side of the reconstruction folder (docs/design.md, "Data"), so that `omnisculpt eval`
   // reads it like the pipeline's: the points fed to the sculptor and, from --from-gt, the keyframe
   // poses of the simulated SfM.
-  PointCloud points;
-  for (const SurfaceKeyframe& kf : stream) {
-    for (const SurfacePoint& point : kf.points) {
-      points.points.push_back(point.position);
-      if (point_colors.empty()) continue;
-      const auto color = point_colors.find(point.id);
-      points.colors.push_back(color != point_colors.end() ? color->second : Rgb8(128, 128, 128));
-    }
-  }
-  WritePlyPoints(points, out / "points.ply");
+  WritePlyPoints(StreamPoints(stream, point_colors), out / "points.ply");
   if (!keyframe_poses.empty()) WriteTum(keyframe_poses, out / "poses.tum");
 
   std::vector<double> ms;
@@ -337,12 +465,38 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
   command->add_option("--colmap", o->colmap,
                       "COLMAP text model folder (cameras.txt, images.txt, points3D.txt); images "
                       "sharing a file name in different folders form one rig keyframe");
+  command->add_option("--drive", o->drive,
+                      "--colmap: the drive of the model's images (rig.json, frames.csv): write "
+                      "the keyframes' rig poses to poses.tum as `omnisculpt sfm` does, so that "
+                      "`omnisculpt eval` reads the folder");
+  command
+      ->add_option("--frame-rate", o->frame_rate,
+                   "--colmap --drive: poses.tum stamps (frame index / rate) when the drive has "
+                   "no frames.csv")
+      ->capture_default_str();
   command->add_option(
       "--out", o->out,
-      "Output folder (surface.ply, surface_closed.ply, points.ply, poses.tum with --from-gt, "
-      "stats/keyframes.csv), new or empty");
+      "Output folder (surface.ply, surface_closed.ply, points.ply, poses.tum with --from-gt or "
+      "--colmap --drive, stats/keyframes.csv), new or empty");
   command->add_flag("--force", o->force,
-                    "Write into --out if it holds an earlier surface output (stats/keyframes.csv)");
+                    "Write into --out if it holds an earlier surface output (stats/keyframes.csv, "
+                    "or surface.json for --method advancing-front)");
+  command
+      ->add_option("--method", o->method,
+                   "sculptor (the incremental 2-manifold of the rays) | advancing-front (a "
+                   "baseline: CGAL's advancing front surface of the same points, every point of "
+                   "the input, no ray and no filter; surface.ply only)")
+      ->capture_default_str();
+  command
+      ->add_option("--af-radius-ratio-bound", o->advancing_front.radius_ratio_bound,
+                   "advancing-front: leave out a candidate facet whose radius is more than this "
+                   "times the mean edge of the front it joins (0: no bound)")
+      ->capture_default_str();
+  command
+      ->add_option("--af-beta", o->advancing_front.beta,
+                   "advancing-front: largest angle (radians) between a candidate facet and its "
+                   "neighbour on the front")
+      ->capture_default_str();
   AddEnclosingOptions(command, &o->enclosing, &o->sculptor);
   AddObservedMeshOptions(command, &o->sculptor.observed);
   AddCarvingOptions(command, &o->sculptor);

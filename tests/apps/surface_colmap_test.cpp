@@ -1,7 +1,9 @@
 // `omnisculpt surface --colmap`: a COLMAP text model written by hand (a rig of two
 // cameras driving through a closed room, points on its walls) is grouped into one keyframe per
 // rig frame, its tracks become rays, and the command sculpts a closed oriented 2-manifold
-// (surface_closed.ply) and its observed part (surface.ply), coloured by the model's RGB.
+// (surface_closed.ply) and its observed part (surface.ply), coloured by the model's RGB; with
+// --drive it writes the keyframes' rig poses (poses.tum) as the truth; --method advancing-front
+// meshes the same points on the room's walls.
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
@@ -18,10 +20,12 @@
 #include <string>
 #include <vector>
 
-#include "pipeline/colmap_keyframes.h"
 #include "calib/error.h"
 #include "calib/mesh_check.h"
 #include "calib/ply.h"
+#include "calib/rig_io.h"
+#include "calib/tum.h"
+#include "pipeline/colmap_keyframes.h"
 
 namespace omni {
 namespace {
@@ -178,6 +182,130 @@ TEST(ColmapKeyframes, SurfaceCommandSculptsAClosedManifoldFromAModel) {
   for (const Rgb8& color : closed.colors) {
     EXPECT_TRUE(color[2] == 77 || color == Rgb8(128, 128, 128));
   }
+  fs::remove_all(dir);
+}
+
+// Runs omnisculpt with `arguments`; returns its exit status and its output in *log.
+int RunOmnisculpt(const fs::path& dir, const std::string& arguments, std::string* log) {
+  const std::string command = std::string("'") + OMNI_EXECUTABLE + "' --quiet " + arguments +
+                              " >'" + (dir / "stdout.txt").string() + "' 2>&1";
+  const int status = std::system(command.c_str());
+  std::ifstream log_stream(dir / "stdout.txt");
+  std::stringstream text;
+  text << log_stream.rdbuf();
+  *log = text.str();
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// A drive of the room model's rig: rig.json (the two cameras 0.6 m apart on the rig's y axis,
+// looking as the rig does) and an image file per camera and frame (never read).
+void WriteRoomDrive(const fs::path& drive) {
+  Rig rig;
+  for (int c = 0; c < 2; ++c) {
+    Camera camera;
+    camera.name = "cam" + std::to_string(c);
+    camera.width = 640;
+    camera.height = 480;
+    camera.params = {500, 500, 320, 240};
+    camera.cam_from_rig.translation = -Eigen::Vector3d(0.0, c == 0 ? -0.3 : 0.3, 0.0);
+    rig.cameras.push_back(camera);
+    fs::create_directories(drive / "images" / camera.name);
+    for (int f = 0; f < kFrames; ++f) {
+      char name[32];
+      std::snprintf(name, sizeof(name), "%06d.png", f);
+      std::ofstream(drive / "images" / camera.name / name) << "x";
+    }
+  }
+  WriteRigJson(rig, drive / "rig.json");
+}
+
+TEST(ColmapKeyframes, SurfaceCommandWritesTheKeyframesRigPosesOfADrive) {
+  const fs::path dir = TempFolder("poses");
+  WriteModel(dir / "model", RoomPoints(5), true);
+  WriteRoomDrive(dir / "drive");
+  const fs::path out = dir / "out";
+  std::string log;
+  ASSERT_EQ(RunOmnisculpt(dir,
+                          "surface --colmap '" + (dir / "model").string() + "' --drive '" +
+                              (dir / "drive").string() + "' --out '" + out.string() +
+                              "' --no-batch --init-keyframes 4",
+                          &log),
+            0)
+      << log;
+  const std::vector<StampedPose> poses = ReadTum(out / "poses.tum");
+  ASSERT_EQ(poses.size(), static_cast<size_t>(kFrames));
+  // The model's cameras: cam_from_world rotation q for both, centres CameraCentre(f, c).
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()));
+  for (int f = 0; f < kFrames; ++f) {
+    EXPECT_NEAR(poses[f].timestamp, f / 15.0, 1e-6);  // frame index / 15, as `sfm` stamps
+    EXPECT_LT(poses[f].world_from_rig.rotation.angularDistance(q.conjugate()), 1e-6) << f;
+    EXPECT_LT((poses[f].world_from_rig.translation - Eigen::Vector3d(f, 0.0, 2.0)).norm(), 1e-6)
+        << f;
+  }
+  // A model of images the drive does not have is refused, naming the frame.
+  fs::remove(dir / "drive" / "images" / "cam0" / "000009.png");
+  fs::remove(dir / "drive" / "images" / "cam1" / "000009.png");
+  ASSERT_NE(
+      RunOmnisculpt(dir,
+                    "surface --colmap '" + (dir / "model").string() + "' --drive '" +
+                        (dir / "drive").string() + "' --out '" + (dir / "out2").string() + "'",
+                    &log),
+      0);
+  EXPECT_NE(log.find("the model's frame '000009' is not a frame of the drive"), std::string::npos)
+      << log;
+  fs::remove_all(dir);
+}
+
+TEST(ColmapKeyframes, AdvancingFrontMeshesTheModelsPointsOnTheRoomsWalls) {
+  const fs::path dir = TempFolder("advancing_front");
+  const std::vector<Observation> points = RoomPoints(5);
+  WriteModel(dir / "model", points, true);
+  const fs::path out = dir / "out";
+  std::string log;
+  ASSERT_EQ(RunOmnisculpt(dir,
+                          "surface --colmap '" + (dir / "model").string() +
+                              "' --method advancing-front --out '" + out.string() + "'",
+                          &log),
+            0)
+      << log;
+  EXPECT_FALSE(fs::exists(out / "surface_closed.ply"));
+  const TriangleMesh mesh = ReadPlyMesh(out / "surface.ply");
+  ASSERT_GT(mesh.triangles.size(), 500u);
+  // Its vertices are the model's points (coloured by their RGB), its triangles on the walls:
+  // the three vertices on one face of the room, but for the few that cut a corner.
+  ASSERT_EQ(mesh.colors.size(), mesh.vertices.size());
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    bool found = false;
+    for (const Observation& o : points)
+      found = found || (o.position - mesh.vertices[i]).norm() < 1e-5;  // PLY floats
+    ASSERT_TRUE(found) << "vertex " << i << " is not a point of the model";
+    EXPECT_EQ(mesh.colors[i][2], 77);
+  }
+  // A triangle lies on the room when its centroid does (the distance to the nearest wall): those
+  // across a corner of the room are off by a fraction of the points' spacing (0.7 m; up to 1.2 m
+  // in the room's corners), one across the room by metres.
+  auto off_the_walls = [](const Eigen::Vector3d& p) {
+    const double planes[6] = {-6.0, 15.0, -5.0, 5.0, 0.0, 5.0};
+    double distance = 1e9;
+    for (int face = 0; face < 6; ++face)
+      distance = std::min(distance, std::abs(p[face / 2] - planes[face]));
+    return distance;
+  };
+  size_t on_the_walls = 0, near_the_walls = 0;
+  double worst = 0.0;
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    const double off =
+        off_the_walls((mesh.vertices[t[0]] + mesh.vertices[t[1]] + mesh.vertices[t[2]]) / 3.0);
+    worst = std::max(worst, off);
+    on_the_walls += off < 1e-5 ? 1 : 0;
+    near_the_walls += off < 0.35 ? 1 : 0;
+  }
+  EXPECT_GT(on_the_walls, 0.85 * mesh.triangles.size())
+      << on_the_walls << " of " << mesh.triangles.size();
+  EXPECT_GT(near_the_walls, 0.98 * mesh.triangles.size())
+      << near_the_walls << " of " << mesh.triangles.size() << ", worst " << worst << " m";
+  EXPECT_LT(worst, 2.5);  // none across the room (10 m wide, 5 m high)
+  EXPECT_NE(log.find("surface: advancing front"), std::string::npos) << log;
   fs::remove_all(dir);
 }
 

@@ -141,10 +141,10 @@ void WriteAdvancingFrontSurface(const SurfaceCommandOptions& o,
   const double total_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf(
-      "surface: advancing front (radius ratio bound %.2f, beta %.2f) of %zu points: %zu "
+      "surface: advancing front (beta %.2f, max edge %.3f) of %zu points: %zu "
       "triangles on %zu vertices in %ld boundary loops, manifold with boundary %s (%.2f s, "
       "%.2f s in all)\n  wrote %s\n",
-      o.advancing_front.radius_ratio_bound, o.advancing_front.beta, points.points.size(),
+      o.advancing_front.beta, o.advancing_front.max_edge, points.points.size(),
       mesh.triangles.size(), mesh.vertices.size(), report.boundary_loops, report.ok ? "yes" : "NO",
       mesh_s, total_s, (out / "surface.ply").c_str());
   const nlohmann::json summary = {
@@ -158,7 +158,7 @@ void WriteAdvancingFrontSurface(const SurfaceCommandOptions& o,
       {"vertices", mesh.vertices.size()},
       {"manifold", report.ok},
       {"boundary_loops", report.boundary_loops},
-      {"radius_ratio_bound", o.advancing_front.radius_ratio_bound},
+      {"max_edge", o.advancing_front.max_edge},
       {"beta", o.advancing_front.beta},
       {"mesh_seconds", mesh_s},
       {"seconds", total_s},
@@ -488,9 +488,9 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                    "the input, no ray and no filter; surface.ply only)")
       ->capture_default_str();
   command
-      ->add_option("--af-radius-ratio-bound", o->advancing_front.radius_ratio_bound,
-                   "advancing-front: leave out a candidate facet whose radius is more than this "
-                   "times the mean edge of the front it joins (0: no bound)")
+      ->add_option("--af-max-edge", o->advancing_front.max_edge,
+                   "advancing-front: never take a facet with an edge longer than this, in the "
+                   "model's units (0: no bound)")
       ->capture_default_str();
   command
       ->add_option("--af-beta", o->advancing_front.beta,

@@ -11,9 +11,32 @@
 
 namespace omni {
 
+namespace {
+
+// CGAL's default priority (the radius of the facet's smallest Delaunay sphere), with the facets
+// of an edge longer than a bound out of reach.
+struct BoundedEdgePriority {
+  double max_squared_edge = 0.0;  // 0: no bound
+
+  template <typename AdvancingFront, typename CellHandle>
+  double operator()(const AdvancingFront& front, CellHandle& cell, const int& index) const {
+    if (max_squared_edge > 0.0) {
+      for (int i = 1; i <= 3; ++i) {
+        for (int j = i + 1; j <= 3; ++j) {
+          if (CGAL::squared_distance(cell->vertex((index + i) % 4)->point(),
+                                     cell->vertex((index + j) % 4)->point()) > max_squared_edge)
+            return front.infinity();
+        }
+      }
+    }
+    return front.smallest_radius_delaunay_sphere(cell, index);
+  }
+};
+
+}  // namespace
+
 std::string AdvancingFrontOptions::Check() const {
-  if (!(radius_ratio_bound >= 0.0) || !std::isfinite(radius_ratio_bound))
-    return "radius_ratio_bound: expected 0 or more";
+  if (!(max_edge >= 0.0) || !std::isfinite(max_edge)) return "max_edge: expected 0 or more";
   if (!(beta > 0.0) || !(beta < M_PI)) return "beta: expected an angle in (0, pi) radians";
   return {};
 }
@@ -28,10 +51,11 @@ TriangleMesh AdvancingFrontSurface(const std::vector<Eigen::Vector3d>& points,
   cgal_points.reserve(points.size());
   for (const Eigen::Vector3d& p : points) cgal_points.emplace_back(p.x(), p.y(), p.z());
   std::vector<std::array<std::size_t, 3>> facets;
-  // CGAL's radius_ratio_bound 0 would drop every facet: "no bound" is an infinite one.
-  const double bound = options.radius_ratio_bound > 0.0 ? options.radius_ratio_bound : 1e300;
+  BoundedEdgePriority priority;
+  priority.max_squared_edge = options.max_edge * options.max_edge;
   CGAL::advancing_front_surface_reconstruction(cgal_points.begin(), cgal_points.end(),
-                                               std::back_inserter(facets), bound, options.beta);
+                                               std::back_inserter(facets), priority,
+                                               /*radius_ratio_bound=*/5.0, options.beta);
   // Only the points in a triangle are vertices, in their input order.
   std::vector<int> vertex_of(points.size(), -1);
   for (const auto& facet : facets) {

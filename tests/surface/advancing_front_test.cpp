@@ -65,13 +65,38 @@ TEST(AdvancingFront, PointsOnASphereGiveAClosedMeshOnTheSphere) {
   EXPECT_GT(mesh.vertices.size(), 0.98 * points.size());
 }
 
+TEST(AdvancingFront, NoTriangleHasAnEdgeAboveTheBound) {
+  const double r = 2.0;
+  const std::vector<Eigen::Vector3d> points = SpherePoints(2000, r, {0, 0, 0});
+  const double spacing = std::sqrt(4.0 * M_PI * r * r / points.size());
+  double longest_unbounded = 0.0;
+  auto longest_edge = [](const TriangleMesh& mesh) {
+    double longest = 0.0;
+    for (const Eigen::Vector3i& t : mesh.triangles) {
+      for (int k = 0; k < 3; ++k) {
+        longest = std::max(longest, (mesh.vertices[t[k]] - mesh.vertices[t[(k + 1) % 3]]).norm());
+      }
+    }
+    return longest;
+  };
+  const TriangleMesh unbounded = AdvancingFrontSurface(points);
+  longest_unbounded = longest_edge(unbounded);
+  AdvancingFrontOptions options;
+  options.max_edge = 0.6 * longest_unbounded;
+  ASSERT_GT(options.max_edge, 0.5 * spacing);
+  const TriangleMesh bounded = AdvancingFrontSurface(points, options);
+  EXPECT_LE(longest_edge(bounded), options.max_edge);
+  EXPECT_GT(bounded.triangles.size(), 0.8 * unbounded.triangles.size());
+  EXPECT_LT(bounded.triangles.size(), unbounded.triangles.size());  // holes where they were
+}
+
 TEST(AdvancingFront, TooFewPointsGiveNoTriangleAndBadOptionsAreRefused) {
   EXPECT_TRUE(AdvancingFrontSurface({{0, 0, 0}, {1, 0, 0}}).triangles.empty());
   AdvancingFrontOptions options;
   options.beta = 0.0;
   EXPECT_THROW(AdvancingFrontSurface(SpherePoints(10, 1.0, {0, 0, 0}), options), std::exception);
   options = {};
-  options.radius_ratio_bound = -1.0;
+  options.max_edge = -1.0;
   EXPECT_NE(options.Check(), "");
 }
 

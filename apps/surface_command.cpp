@@ -14,6 +14,7 @@
 #include <sstream>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "apps/commands.h"
@@ -42,6 +43,7 @@ struct SurfaceCommandOptions {
   std::string out;
   bool force = false;
   std::string method = "sculptor";  // or "advancing-front", the baseline on the same points
+  std::string af_points = "all";    // advancing-front: all the stream's points, or "sculpted"
   AdvancingFrontOptions advancing_front;
   std::string enclosing = EnclosingName(SculptorOptions().enclosing);
   bool no_batch = false;
@@ -106,8 +108,9 @@ PointCloud StreamPoints(const std::vector<SurfaceKeyframe>& stream,
 }
 
 // --method advancing-front: CGAL's advancing front surface of every point of the stream (no ray,
-// no filter of the sculptor), written as surface.ply with points.ply, poses.tum and surface.json,
-// a folder `omnisculpt eval` reads (no surface_closed.ply: the mesh has a boundary).
+// no filter of the sculptor) or of those the sculptor inserts (--af-points sculpted), written as
+// surface.ply with points.ply, poses.tum and surface.json, a folder `omnisculpt eval` reads (no
+// surface_closed.ply: the mesh has a boundary).
 void WriteAdvancingFrontSurface(const SurfaceCommandOptions& o,
                                 const std::vector<SurfaceKeyframe>& stream,
                                 const std::unordered_map<PointId, Rgb8>& point_colors,
@@ -118,7 +121,33 @@ void WriteAdvancingFrontSurface(const SurfaceCommandOptions& o,
   // An earlier sculptor output replaced (--force): no closed surface of another method is left.
   std::filesystem::remove(out / "surface_closed.ply");
   std::filesystem::remove(out / "stats" / "keyframes.csv");
-  const PointCloud points = StreamPoints(stream, point_colors);
+  PointCloud points = StreamPoints(stream, point_colors);
+  double sculptor_s = 0.0;
+  if (o.af_points == "sculpted") {
+    // The points the sculptor inserts: after its §5.1 filters and its free-space rejection.
+    const auto sculptor_start = std::chrono::steady_clock::now();
+    IncrementalSculptor sculptor(o.sculptor);
+    for (const SurfaceKeyframe& kf : stream) sculptor.AddKeyframe(kf);
+    sculptor.Finish();
+    const std::vector<PointId> inserted = sculptor.InsertedPoints();
+    const std::unordered_set<PointId> kept(inserted.begin(), inserted.end());
+    PointCloud sculpted;
+    size_t index = 0;
+    for (const SurfaceKeyframe& kf : stream) {
+      for (const SurfacePoint& point : kf.points) {
+        if (kept.count(point.id) != 0) {
+          sculpted.points.push_back(points.points[index]);
+          if (!points.colors.empty()) sculpted.colors.push_back(points.colors[index]);
+        }
+        ++index;
+      }
+    }
+    points = std::move(sculpted);
+    sculptor_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - sculptor_start).count();
+    spdlog::info("surface: {} points inserted by the sculptor ({:.1f} s)", points.points.size(),
+                 sculptor_s);
+  }
   const auto mesh_start = std::chrono::steady_clock::now();
   TriangleMesh mesh = AdvancingFrontSurface(points.points, o.advancing_front);
   const double mesh_s =
@@ -141,10 +170,10 @@ void WriteAdvancingFrontSurface(const SurfaceCommandOptions& o,
   const double total_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf(
-      "surface: advancing front (beta %.2f, max edge %.3f) of %zu points: %zu "
+      "surface: advancing front (beta %.2f, max edge %.3f) of %zu points (%s): %zu "
       "triangles on %zu vertices in %ld boundary loops, manifold with boundary %s (%.2f s, "
       "%.2f s in all)\n  wrote %s\n",
-      o.advancing_front.beta, o.advancing_front.max_edge, points.points.size(),
+      o.advancing_front.beta, o.advancing_front.max_edge, points.points.size(), o.af_points.c_str(),
       mesh.triangles.size(), mesh.vertices.size(), report.boundary_loops, report.ok ? "yes" : "NO",
       mesh_s, total_s, (out / "surface.ply").c_str());
   const nlohmann::json summary = {
@@ -159,6 +188,8 @@ void WriteAdvancingFrontSurface(const SurfaceCommandOptions& o,
       {"manifold", report.ok},
       {"boundary_loops", report.boundary_loops},
       {"max_edge", o.advancing_front.max_edge},
+      {"points_from", o.af_points},
+      {"sculptor_seconds", sculptor_s},
       {"beta", o.advancing_front.beta},
       {"mesh_seconds", mesh_s},
       {"seconds", total_s},
@@ -190,6 +221,9 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
                      "expected sculptor or advancing-front, got '" + o.method + "'");
   }
   ThrowIfInvalid(o.advancing_front.Check(), "AdvancingFrontOptions");
+  if (o.af_points != "all" && o.af_points != "sculpted") {
+    throw InputError("", "--af-points", "expected all or sculpted, got '" + o.af_points + "'");
+  }
   ThrowIfInvalid(o.sculptor.Check(), "SculptorOptions");
   ThrowIfInvalid(o.gt.Check(), "GtKeyframeOptions");
   const auto start = std::chrono::steady_clock::now();
@@ -486,6 +520,12 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                    "sculptor (the incremental 2-manifold of the rays) | advancing-front (a "
                    "baseline: CGAL's advancing front surface of the same points, every point of "
                    "the input, no ray and no filter; surface.ply only)")
+      ->capture_default_str();
+  command
+      ->add_option("--af-points", o->af_points,
+                   "advancing-front: all (every point of the input) | sculpted (only those the "
+                   "sculptor inserts: after its filters and its free-space rejection; the "
+                   "sculptor runs first, its surface is not written)")
       ->capture_default_str();
   command
       ->add_option("--af-max-edge", o->advancing_front.max_edge,

@@ -1529,6 +1529,13 @@ TriangleMesh IncrementalSculptor::ExtractMesh(std::vector<PointId>* vertex_point
   });
 }
 
+std::vector<PointId> IncrementalSculptor::InsertedPoints() const {
+  std::vector<PointId> ids;
+  ids.reserve(impl_->points.size());
+  for (const PointRecord& point : impl_->points) ids.push_back(point.id);
+  return ids;
+}
+
 TriangleMesh IncrementalSculptor::ExtractObservedMesh(std::vector<PointId>* vertex_points,
                                                       ObservedMeshStats* stats) const {
   const Impl& m = *impl_;

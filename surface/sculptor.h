@@ -327,6 +327,9 @@ class IncrementalSculptor {
   // vertex. vertex_points as for ExtractMesh.
   TriangleMesh ExtractObservedMesh(std::vector<PointId>* vertex_points = nullptr,
                                    ObservedMeshStats* stats = nullptr) const;
+  // The points inserted so far, in their order: those the §5.1 filters kept and whose conflict
+  // zone did not meet O (the "points added" of KeyframeStats).
+  std::vector<PointId> InsertedPoints() const;
   // The output position of the Delaunay vertex (DelaunayMesh index): smoothed, or its own.
   Eigen::Vector3d SurfacePosition(int vertex) const;
   const DelaunayMesh& triangulation() const;

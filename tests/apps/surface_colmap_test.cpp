@@ -14,6 +14,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <regex>
 #include <sstream>
@@ -306,6 +307,29 @@ TEST(ColmapKeyframes, AdvancingFrontMeshesTheModelsPointsOnTheRoomsWalls) {
       << near_the_walls << " of " << mesh.triangles.size() << ", worst " << worst << " m";
   EXPECT_LT(worst, 2.5);  // none across the room (10 m wide, 5 m high)
   EXPECT_NE(log.find("surface: advancing front"), std::string::npos) << log;
+  // --af-points sculpted: the points the sculptor inserts, as many as its run says it added.
+  ASSERT_EQ(RunOmnisculpt(dir,
+                          "surface --colmap '" + (dir / "model").string() + "' --out '" +
+                              (dir / "sculptor").string() + "'",
+                          &log),
+            0)
+      << log;
+  ASSERT_EQ(RunOmnisculpt(dir,
+                          "surface --colmap '" + (dir / "model").string() +
+                              "' --method advancing-front --af-points sculpted --out '" +
+                              (dir / "sculpted").string() + "'",
+                          &log),
+            0)
+      << log;
+  const nlohmann::json sculptor =
+      nlohmann::json::parse(std::ifstream(dir / "sculptor" / "surface.json"));
+  const nlohmann::json sculpted =
+      nlohmann::json::parse(std::ifstream(dir / "sculpted" / "surface.json"));
+  const size_t added = sculptor.at("points_added").get<size_t>();
+  EXPECT_LT(added, points.size());  // the filters removed some
+  EXPECT_EQ(sculpted.at("points").get<size_t>(), added);
+  EXPECT_EQ(sculpted.at("points_from").get<std::string>(), "sculpted");
+  EXPECT_LE(ReadPlyMesh(dir / "sculpted" / "surface.ply").vertices.size(), added);
   fs::remove_all(dir);
 }
 

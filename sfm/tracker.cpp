@@ -33,6 +33,9 @@ std::string TrackerOptions::Check() const {
   if (num_fixed_keyframes < 1) return "num_fixed_keyframes: expected at least 1";
   if (global_bundle_adjustment_threads < 1)
     return "global_bundle_adjustment_threads: expected at least 1";
+  if (!(global_bundle_adjustment_function_tolerance > 0.0 &&
+        global_bundle_adjustment_function_tolerance < 1.0))
+    return "global_bundle_adjustment_function_tolerance: expected a value in (0, 1)";
   if (min_init_points < 5) return "min_init_points: expected at least 5";
   if (max_init_frames < 1) return "max_init_frames: expected at least 1";
   if (min_stereo_points < 5) return "min_stereo_points: expected at least 5";
@@ -1688,6 +1691,7 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double me
   }
   options.linear_solver = BundleAdjustmentOptions::LinearSolver::kSparseSchur;
   options.num_threads = m.options.global_bundle_adjustment_threads;
+  options.function_tolerance = m.options.global_bundle_adjustment_function_tolerance;
   if (problem.observations.empty()) return {};
   const BundleAdjustmentSummary summary = LocalBundleAdjust(m.rig, options, &problem);
   if (!summary.success) return summary;

@@ -793,3 +793,21 @@ TEST(TrackerInitialisation, ResectsTheFramesReadWhileInitialisingAndRestartsAfte
 
 }  // namespace
 }  // namespace omni
+
+namespace omni {
+namespace {
+
+// The global adjustments' stopping tolerance is checked with the tracker's options.
+TEST(TrackerOptionsCheck, TheGlobalAdjustmentToleranceIsAShareOfTheCost) {
+  TrackerOptions options;
+  EXPECT_EQ(options.Check(), "");
+  for (const double bad : {0.0, -1e-6, 1.0, std::nan("")}) {
+    options.global_bundle_adjustment_function_tolerance = bad;
+    EXPECT_NE(options.Check().find("global_bundle_adjustment_function_tolerance"),
+              std::string::npos)
+        << bad;
+  }
+}
+
+}  // namespace
+}  // namespace omni

@@ -149,17 +149,12 @@ void WriteAdvancingFrontSurface(const SurfaceCommandOptions& o,
                  sculptor_s);
   }
   const auto mesh_start = std::chrono::steady_clock::now();
-  TriangleMesh mesh = AdvancingFrontSurface(points.points, o.advancing_front);
+  std::vector<size_t> input_of_vertex;
+  TriangleMesh mesh = AdvancingFrontSurface(points.points, o.advancing_front, &input_of_vertex);
   const double mesh_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
   if (!points.colors.empty()) {
-    // The vertices are the points in a triangle, in order: match them back to their colours.
-    size_t next = 0;
-    for (const Eigen::Vector3d& vertex : mesh.vertices) {
-      while (next < points.points.size() && points.points[next] != vertex) ++next;
-      mesh.colors.push_back(next < points.colors.size() ? points.colors[next]
-                                                        : Rgb8(128, 128, 128));
-    }
+    for (size_t input : input_of_vertex) mesh.colors.push_back(points.colors[input]);
   }
   WritePlyMesh(mesh, out / "surface.ply");
   WritePlyPoints(points, out / "points.ply");

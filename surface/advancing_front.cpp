@@ -42,8 +42,10 @@ std::string AdvancingFrontOptions::Check() const {
 }
 
 TriangleMesh AdvancingFrontSurface(const std::vector<Eigen::Vector3d>& points,
-                                   const AdvancingFrontOptions& options) {
+                                   const AdvancingFrontOptions& options,
+                                   std::vector<size_t>* input_of_vertex) {
   ThrowIfInvalid(options.Check(), "AdvancingFrontOptions");
+  if (input_of_vertex) input_of_vertex->clear();
   using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
   TriangleMesh mesh;
   if (points.size() < 3) return mesh;
@@ -65,6 +67,7 @@ TriangleMesh AdvancingFrontSurface(const std::vector<Eigen::Vector3d>& points,
     if (vertex_of[i] < 0) continue;
     vertex_of[i] = static_cast<int>(mesh.vertices.size());
     mesh.vertices.push_back(points[i]);
+    if (input_of_vertex) input_of_vertex->push_back(i);
   }
   mesh.triangles.reserve(facets.size());
   for (const auto& facet : facets) {

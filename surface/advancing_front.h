@@ -29,7 +29,9 @@ struct AdvancingFrontOptions {
 
 // The triangle mesh over `points`: its vertices are the input points that are in a triangle, in
 // their input order; its triangles as CGAL orients them. Fewer than 3 points give no triangle.
+// *input_of_vertex, if given, receives each vertex's index in `points`.
 TriangleMesh AdvancingFrontSurface(const std::vector<Eigen::Vector3d>& points,
-                                   const AdvancingFrontOptions& options = {});
+                                   const AdvancingFrontOptions& options = {},
+                                   std::vector<size_t>* input_of_vertex = nullptr);
 
 }  // namespace omni

@@ -41,6 +41,18 @@ TEST(AdvancingFront, PointsOnASphereGiveAClosedMeshOnTheSphere) {
     while (next < points.size() && points[next] != v) ++next;
     ASSERT_LT(next, points.size()) << "a vertex that is not an input point, or out of order";
   }
+  // The indices it gives back name those input points, in increasing order.
+  std::vector<size_t> input_of_vertex;
+  const TriangleMesh indexed = AdvancingFrontSurface(points, {}, &input_of_vertex);
+  ASSERT_EQ(input_of_vertex.size(), indexed.vertices.size());
+  ASSERT_EQ(indexed.vertices.size(), mesh.vertices.size());
+  for (size_t v = 0; v < input_of_vertex.size(); ++v) {
+    ASSERT_LT(input_of_vertex[v], points.size());
+    EXPECT_EQ(points[input_of_vertex[v]], indexed.vertices[v]) << "vertex " << v;
+    if (v > 0) {
+      EXPECT_LT(input_of_vertex[v - 1], input_of_vertex[v]);
+    }
+  }
   // The faces lie on the sphere: each centroid within the sag of a chord of the point spacing
   // (about 0.08 r for 2,000 points) -- a facet across the sphere's inside would be at r.
   const double spacing = std::sqrt(4.0 * M_PI * r * r / points.size());

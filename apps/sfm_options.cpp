@@ -69,6 +69,9 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
   command->add_flag("!--no-final-frame-refinement", o->sfm.final_frame_refinement,
                     "Frames between keyframes keep their pose between their keyframes (default: "
                     "each posed again against the final map)");
+  command->add_flag("!--no-detect-ahead", o->sfm.detect_ahead,
+                    "Detect each frame's corners on the SfM thread (default: on the image "
+                    "prefetch thread, ahead of the frame's tracking; the same result)");
   command->add_flag("!--no-frames-between-keyframes", o->sfm.frame_poses_between_keyframes,
                     "A tracked frame follows only the keyframe it was tracked from (default: "
                     "both keyframes around it)");

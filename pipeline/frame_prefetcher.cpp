@@ -1,6 +1,7 @@
 #include "pipeline/frame_prefetcher.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cassert>
@@ -34,10 +35,11 @@ std::vector<cv::Mat> LoadGrayFrame(const Drive& drive, size_t frame) {
 }
 
 FramePrefetcher::FramePrefetcher(size_t num_frames, Loader loader,
-                                 const FramePrefetcherOptions& options)
+                                 const FramePrefetcherOptions& options, Prepare prepare)
     : num_frames_(num_frames),
       frames_ahead_(static_cast<size_t>(std::max(options.frames_ahead, 1))),
-      loader_(std::move(loader)) {
+      loader_(std::move(loader)),
+      prepare_(std::move(prepare)) {
   ThrowIfInvalid(options.Check(), "FramePrefetcherOptions");
   thread_ = std::thread([this] { Run(); });
 }
@@ -50,6 +52,11 @@ FramePrefetcher::FramePrefetcher(const Drive& drive, size_t num_frames,
 FramePrefetcher::~FramePrefetcher() { Stop(); }
 
 void FramePrefetcher::Run() {
+  // The loader's and the prepare step's parallel work runs in an arena of its own: a thread of
+  // the consumer waiting in a parallel loop of its own then never picks up a task of this one
+  // (TBB lets a waiting thread run any task of its arena), which would make the consumer wait
+  // for the next frame's decoding or detection.
+  tbb::task_arena arena;
   for (size_t f = 0; f < num_frames_; ++f) {
     {
       std::unique_lock<std::mutex> lock(mutex_);
@@ -59,12 +66,21 @@ void FramePrefetcher::Run() {
     }
     PrefetchedFrame frame;
     frame.frame = f;
-    try {
-      frame.images = loader_(f);
-    } catch (...) {
-      frame.images.clear();
-      frame.error = std::current_exception();
-    }
+    arena.execute([&] {
+      try {
+        frame.images = loader_(f);
+      } catch (...) {
+        frame.images.clear();
+        frame.error = std::current_exception();
+      }
+      if (prepare_ && frame.loaded()) {
+        try {
+          prepare_(&frame);
+        } catch (...) {
+          frame.corners.reset();
+        }
+      }
+    });
     std::lock_guard<std::mutex> lock(mutex_);
     if (stop_) return;
     frames_.push_back(std::move(frame));

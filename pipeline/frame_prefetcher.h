@@ -6,7 +6,8 @@
 // raised (the caller reports and skips it, or rethrows). At most frames_ahead frames are decoded
 // (or being decoded) and not yet taken, so memory stays bounded however slow the consumer is.
 // Destroying the prefetcher (or Stop) before the last frame stops the decoding and joins the
-// thread.
+// thread. A `prepare` step, when given, runs on the same thread on each frame that loaded
+// (the SfM loop detects the frame's corners there, ahead of its tracking).
 
 #include <condition_variable>
 #include <cstddef>
@@ -21,6 +22,7 @@
 #include <vector>
 
 #include "calib/drive.h"
+#include "sfm/track_builder.h"
 
 namespace omni {
 
@@ -36,6 +38,9 @@ struct PrefetchedFrame {
   size_t frame = 0;
   std::vector<cv::Mat> images;  // one per camera; empty when an image could not be read
   std::exception_ptr error;     // what reading the frame threw (an InputError for bad images)
+  // The frame's corners when the prefetcher's prepare step detected them (empty otherwise:
+  // the consumer detects them itself).
+  std::optional<FrameCorners> corners;
 
   bool loaded() const { return !error; }
   void Rethrow() const {
@@ -53,9 +58,13 @@ class FramePrefetcher {
  public:
   // The images of one frame, one per camera; throws (InputError) when one cannot be read.
   using Loader = std::function<std::vector<cv::Mat>(size_t frame)>;
+  // Work on a frame that loaded, on the prefetch thread before the frame is delivered; what it
+  // throws is dropped (the consumer then does that work itself and meets the error there).
+  using Prepare = std::function<void(PrefetchedFrame* frame)>;
 
   // Frames 0 .. num_frames-1 of `loader`; decoding starts at once.
-  FramePrefetcher(size_t num_frames, Loader loader, const FramePrefetcherOptions& options = {});
+  FramePrefetcher(size_t num_frames, Loader loader, const FramePrefetcherOptions& options = {},
+                  Prepare prepare = {});
   // The grey images (LoadGrayFrame) of the first num_frames frames of `drive`, which must
   // outlive the prefetcher.
   FramePrefetcher(const Drive& drive, size_t num_frames,
@@ -81,6 +90,7 @@ class FramePrefetcher {
   const size_t num_frames_;
   const size_t frames_ahead_;
   Loader loader_;
+  Prepare prepare_;
   mutable std::mutex mutex_;
   std::condition_variable ready_, room_;
   std::deque<PrefetchedFrame> frames_;  // decoded, not yet taken, in order

@@ -303,7 +303,9 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
   } else {
     row.loaded = true;
     TrackedFrame tracked =
-        s.builder.AddFrame(frame.images, ReprojectionPredictor(s.tracker, s.rig));
+        frame.corners ? s.builder.AddDetectedFrame(std::move(*frame.corners),
+                                                   ReprojectionPredictor(s.tracker, s.rig))
+                      : s.builder.AddFrame(frame.images, ReprojectionPredictor(s.tracker, s.rig));
     row.corners = tracked.num_corners;
     row.matched = tracked.num_matched;
     row.predicted = tracked.num_predicted;
@@ -513,9 +515,15 @@ SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunne
   {
     // Stopped and joined when this scope ends (a stop, an error, or the last frame).
     const size_t first = static_cast<size_t>(options.first_frame);
+    FramePrefetcher::Prepare detect;
+    if (options.detect_ahead) {
+      detect = [&harris = options.tracks.harris](PrefetchedFrame* frame) {
+        frame->corners = DetectFrameCorners(frame->images, harris);
+      };
+    }
     FramePrefetcher prefetcher(
-        num_frames, [&source, first](size_t f) { return source.load(first + f); },
-        options.prefetch);
+        num_frames, [&source, first](size_t f) { return source.load(first + f); }, options.prefetch,
+        std::move(detect));
     for (size_t f = first; f < first + num_frames; ++f) {
       if (callbacks.stop && callbacks.stop()) {
         stopped = true;

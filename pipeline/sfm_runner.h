@@ -27,6 +27,10 @@ namespace omni {
 
 struct SfmRunnerOptions {
   FramePrefetcherOptions prefetch;
+  // Each frame's Harris corners are detected on the prefetch thread, ahead of its tracking
+  // (DetectFrameCorners), so that the SfM thread spends its time on tracking and detection
+  // uses a core the tracking leaves idle; the result is the same either way.
+  bool detect_ahead = true;
   TrackBuilderOptions tracks;
   TrackerOptions tracker;
   // Revisits recognised among the old keyframes, verified, and the map corrected (pose graph

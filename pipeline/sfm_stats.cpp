@@ -42,6 +42,8 @@ std::string SfmStagesCsv(const SfmStats& s) {
   // The rest of the SfM's time (keyframe selection, map upkeep, handing keyframes over).
   stages.push_back({"other", std::max(0.0, s.total_seconds - timed)});
   stages.push_back({"total", s.total_seconds});
+  // Detection on the prefetch thread, ahead of the frames' tracking: not part of the total.
+  stages.push_back({"detect_ahead", s.front.detect_ahead});
   std::ostringstream csv;
   csv << "stage,seconds,ms_per_frame\n";
   const double frames = static_cast<double>(std::max<size_t>(s.frames, 1));

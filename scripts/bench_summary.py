@@ -3,7 +3,8 @@
 folder): one row per build and case, the median over that build's rounds, then, with two builds,
 the ratios A / B of those medians.
 
-Columns: frames/s (frames over the command's wall time), SfM ms per frame in detect, match, resect,
+Columns: frames/s (frames over the command's wall time), SfM ms per frame in detect (on the SfM
+thread; "detect ahead": on the prefetch thread, outside the SfM's time), match, resect,
 bundle adjustment (local) and the rest of the SfM's time (other: triangulation, the map-point
 search, shown apart when stats/sfm_stages.csv has it, map upkeep, loading, loop closures, the
 final adjustment), the SfM's time waiting on a full surface queue,
@@ -25,6 +26,7 @@ import surface_bench_summary  # noqa: E402
 COLUMNS = [  # key, heading, format, lower is better (None: no ratio)
     ("fps", "frames/s", "{:.2f}", False),
     ("detect", "detect", "{:.1f}", True),
+    ("detect_ahead", "detect ahead", "{:.1f}", True),
     ("match", "match", "{:.1f}", True),
     ("resect", "resect", "{:.1f}", True),
     ("ba", "BA", "{:.1f}", True),
@@ -65,6 +67,8 @@ def run_figures(run):
         for key, stage in [("detect", "detect"), ("match", "match"), ("resect", "resect"),
                            ("ba", "bundle_adjustment"), ("queue", "queue_wait")]:
             fig[key] = stages.get(stage, 0.0)
+        if "detect_ahead" in stages:  # a row since detection moved to the prefetch thread
+            fig["detect_ahead"] = stages["detect_ahead"]
         if "map_search" in stages:  # a row since the bench was written
             fig["map_search"] = stages["map_search"]
         fig["sfm_total"] = stages.get("total", 0.0)

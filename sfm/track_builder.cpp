@@ -59,6 +59,22 @@ TrackBuilder::TrackBuilder(const Rig& rig, const TrackBuilderOptions& options)
     }
 }
 
+FrameCorners DetectFrameCorners(const std::vector<cv::Mat>& images, const HarrisOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const int num_cameras = static_cast<int>(images.size());
+  FrameCorners detected;
+  detected.prepared.resize(num_cameras);
+  detected.corners.resize(num_cameras);
+  tbb::parallel_for(0, num_cameras, [&](int c) {
+    detected.prepared[c] = PrepareImage(images[c], options);
+    for (const Corner& corner : DetectHarrisCorners(detected.prepared[c], options))
+      detected.corners[c].push_back(corner.pixel);
+  });
+  detected.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return detected;
+}
+
 TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
                                     const PixelPredictor& predict) {
   if (images.size() != rig_.NumCameras()) {
@@ -66,7 +82,24 @@ TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
                                 " images for a rig of " + std::to_string(rig_.NumCameras()) +
                                 " cameras");
   }
-  const int num_cameras = static_cast<int>(images.size());
+  FrameCorners detected = DetectFrameCorners(images, options_.harris);
+  timings_.detect += detected.seconds;
+  return AddCorners(std::move(detected), predict);
+}
+
+TrackedFrame TrackBuilder::AddDetectedFrame(FrameCorners detected, const PixelPredictor& predict) {
+  if (detected.prepared.size() != rig_.NumCameras() ||
+      detected.corners.size() != rig_.NumCameras()) {
+    throw std::invalid_argument(
+        "TrackBuilder::AddDetectedFrame: corners of " + std::to_string(detected.prepared.size()) +
+        " cameras for a rig of " + std::to_string(rig_.NumCameras()) + " cameras");
+  }
+  timings_.detect_ahead += detected.seconds;
+  return AddCorners(std::move(detected), predict);
+}
+
+TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredictor& predict) {
+  const int num_cameras = static_cast<int>(rig_.NumCameras());
   TrackedFrame frame;
   frame.relocalising = lost_ && !keyframe_history_.empty();
   const std::vector<CameraState>& sources =
@@ -85,18 +118,9 @@ TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
   }
   ++frame_index_;
 
-  // Detection, in parallel over the cameras.
-  auto start = std::chrono::steady_clock::now();
-  std::vector<cv::Mat> prepared(num_cameras);
-  std::vector<std::vector<Eigen::Vector2d>> corners(num_cameras);
-  tbb::parallel_for(0, num_cameras, [&](int c) {
-    prepared[c] = PrepareImage(images[c], options_.harris);
-    for (const Corner& corner : DetectHarrisCorners(prepared[c], options_.harris))
-      corners[c].push_back(corner.pixel);
-  });
-  auto now = std::chrono::steady_clock::now();
-  timings_.detect += std::chrono::duration<double>(now - start).count();
-  start = now;
+  std::vector<cv::Mat>& prepared = detected.prepared;
+  std::vector<std::vector<Eigen::Vector2d>>& corners = detected.corners;
+  const auto start = std::chrono::steady_clock::now();
 
   // Search regions (the predictor reads the tracker: called here, not in the parallel part).
   std::vector<std::vector<SearchRegion>> regions(num_cameras);

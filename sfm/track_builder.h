@@ -69,6 +69,19 @@ struct TrackedFrame {
   bool relocalising = false;  // matched against the last keyframe
 };
 
+// The detection step of TrackBuilder::AddFrame for one frame: each camera's prepared image
+// (PrepareImage) and its Harris corners (prepared pixels, strongest first). It needs nothing
+// of the tracker, so a caller may compute it ahead, on another thread (the SfM loop does it on
+// its prefetch thread while the frame before is tracked).
+struct FrameCorners {
+  std::vector<cv::Mat> prepared;                      // one per camera
+  std::vector<std::vector<Eigen::Vector2d>> corners;  // one list per camera
+  double seconds = 0.0;                               // wall time of the detection
+};
+
+// The cameras detected in parallel (TBB).
+FrameCorners DetectFrameCorners(const std::vector<cv::Mat>& images, const HarrisOptions& options);
+
 // Input-image pixel where `track` should appear in camera `camera` of the new frame (its map
 // point projected by the predicted pose); false when there is no prediction.
 using PixelPredictor = std::function<bool(int camera, int track, Eigen::Vector2d* pixel)>;
@@ -83,6 +96,9 @@ class TrackBuilder {
 
   // images[c] is camera c's image of the frame (8-bit grey or colour, the size rig.json gives).
   TrackedFrame AddFrame(const std::vector<cv::Mat>& images, const PixelPredictor& predict = {});
+  // The same with the frame's corners detected beforehand (DetectFrameCorners with
+  // options.harris); the result is the same. Their detection time counts as detect_ahead.
+  TrackedFrame AddDetectedFrame(FrameCorners detected, const PixelPredictor& predict = {});
   // What the tracker made of the frame just added: a keyframe becomes the reference of a later
   // re-localisation; after a frame not tracked, the next frames are matched against it.
   void SetFrameResult(bool tracked, bool keyframe);
@@ -108,9 +124,10 @@ class TrackBuilder {
                                              const std::vector<char>& eligible);
 
   struct Timings {
-    double detect = 0.0;      // seconds (wall) since the start: preparation and Harris
-    double match = 0.0;       // ZNCC matching and the bearings
-    double map_search = 0.0;  // map-point re-observation (reference patches and search)
+    double detect = 0.0;        // seconds (wall) since the start: preparation and Harris
+    double detect_ahead = 0.0;  // the same for the frames detected beforehand (FrameCorners)
+    double match = 0.0;         // ZNCC matching and the bearings
+    double map_search = 0.0;    // map-point re-observation (reference patches and search)
   };
   Timings StageTimings() const { return timings_; }
 
@@ -122,6 +139,8 @@ class TrackBuilder {
     Eigen::Vector2d flow = Eigen::Vector2d::Zero();  // predicted displacement per frame
     cv::Mat descriptors;  // of the corners, computed when first needed (Describe)
   };
+  // AddFrame after the detection.
+  TrackedFrame AddCorners(FrameCorners detected, const PixelPredictor& predict);
   // The descriptors of a camera state's corners (computed once; again after corners were
   // added by the map-point search).
   const cv::Mat& Describe(CameraState* state) const;

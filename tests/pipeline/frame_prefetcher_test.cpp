@@ -115,6 +115,44 @@ TEST(PipelineFramePrefetcher, AFrameThatCannotBeReadComesWithItsErrorAndTheNextO
   EXPECT_FALSE(prefetcher.Next().has_value());
 }
 
+// The prepare step runs on the prefetch thread on every frame that loaded, before the frame is
+// delivered; a frame that could not be read is not prepared, and what the step throws leaves
+// the frame unprepared (the consumer does the work itself) rather than failing it.
+TEST(PipelineFramePrefetcher, PreparesEachLoadedFrameOnItsThreadBeforeDeliveringIt) {
+  const std::thread::id consumer = std::this_thread::get_id();
+  std::atomic<int> on_consumer{0};
+  FramePrefetcher prefetcher(
+      6,
+      [](size_t frame) {
+        if (frame == 2) throw InputError("images/cam0/000002.png", "image", "cannot be decoded");
+        return FakeImages(frame, 2);
+      },
+      FramePrefetcherOptions(),
+      [&](PrefetchedFrame* frame) {
+        if (std::this_thread::get_id() == consumer) ++on_consumer;
+        if (frame->frame == 4) throw std::runtime_error("detection failed");
+        FrameCorners corners;
+        corners.prepared = frame->images;
+        corners.corners.assign(frame->images.size(), {Eigen::Vector2d(frame->frame, 1.0)});
+        frame->corners = std::move(corners);
+      });
+  for (size_t f = 0; f < 6; ++f) {
+    std::optional<PrefetchedFrame> frame = prefetcher.Next();
+    ASSERT_TRUE(frame.has_value());
+    EXPECT_EQ(frame->frame, f);
+    if (f == 2 || f == 4) {
+      EXPECT_EQ(frame->loaded(), f == 4);
+      EXPECT_FALSE(frame->corners.has_value()) << f;
+      continue;
+    }
+    ASSERT_TRUE(frame->corners.has_value()) << f;
+    ASSERT_EQ(frame->corners->corners.size(), 2u);
+    EXPECT_EQ(frame->corners->corners[1][0].x(), static_cast<double>(f));
+    EXPECT_EQ(frame->corners->prepared[1].at<int>(0, 0), static_cast<int>(f * 10 + 1));
+  }
+  EXPECT_EQ(on_consumer, 0);
+}
+
 // The bound: frame f starts decoding only once the consumer has begun taking frame
 // f - frames_ahead (f < begun + frames_ahead, `begun` counted before each Next()); and the
 // prefetcher does fill its bound while the consumer is busy.

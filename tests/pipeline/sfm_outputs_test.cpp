@@ -195,6 +195,7 @@ TEST(SfmStats, CountsFramesAndWritesBothFiles) {
   stats.colmap.observations = 400;
   stats.colmap.mean_reprojection_error = 0.25;
   stats.front.detect = 1.0;
+  stats.front.detect_ahead = 3.0;  // on another thread: not part of the total
   stats.back.map_search = 0.5;
   stats.total_seconds = 2.0;
   EXPECT_EQ(stats.frames, 4u);
@@ -211,14 +212,15 @@ TEST(SfmStats, CountsFramesAndWritesBothFiles) {
     EXPECT_NE(summary.find(row), std::string::npos) << row << " in\n" << summary;
   const std::vector<std::string> stages =
       testing::SplitText(testing::ReadTextFile(dir.path() / "sfm_stages.csv"));
-  ASSERT_EQ(stages.size(), 14u);
+  ASSERT_EQ(stages.size(), 15u);
   EXPECT_EQ(stages[0], "stage,seconds,ms_per_frame");
   EXPECT_EQ(stages[2], "detect,1,250");
   EXPECT_EQ(stages[6], "map_search,0.5,125");
   EXPECT_EQ(stages[9], "final_bundle_adjustment,0,0");
   EXPECT_EQ(stages[10], "final_frame_refinement,0,0");
   EXPECT_EQ(stages[12], "other,0.5,125");  // total - detect - map_search
-  EXPECT_EQ(stages.back(), "total,2,500");
+  EXPECT_EQ(stages[13], "total,2,500");
+  EXPECT_EQ(stages.back(), "detect_ahead,3,750");
 }
 
 }  // namespace

@@ -166,6 +166,47 @@ TEST(TrackBuilder, AFrameWithTheWrongNumberOfImagesThrows) {
   const std::vector<cv::Mat> one_image = {
       cv::Mat(rig.cameras[0].height, rig.cameras[0].width, CV_8UC1, cv::Scalar(0))};
   EXPECT_THROW(builder.AddFrame(one_image), std::invalid_argument);
+  EXPECT_THROW(builder.AddDetectedFrame(DetectFrameCorners(one_image, HarrisOptions())),
+               std::invalid_argument);
+}
+
+// The corners detected beforehand (DetectFrameCorners, as the SfM loop does on its prefetch
+// thread) give the frames the builder gives when it detects them itself: the same corners,
+// tracks, pixels and bearings, frame after frame; only the time goes to detect_ahead.
+TEST(TrackBuilder, CornersDetectedAheadGiveTheSameFrames) {
+  Rig rig = test::TwoCameraRig();
+  TrackBuilderOptions options;
+  options.search_radius = 12.0;
+  options.harris.downscale = 1.5;  // the prepared images are not the input images
+  TrackBuilder itself(rig, options), ahead(rig, options);
+  const Eigen::Vector2d shifts[2] = {Eigen::Vector2d(6.0, 1.5), Eigen::Vector2d(-4.5, -3.0)};
+  for (int f = 0; f < 4; ++f) {
+    std::vector<cv::Mat> images;
+    for (int c = 0; c < 2; ++c)
+      images.push_back(MakeSyntheticTexture(400, 300, f * shifts[c], 250, 30 + c));
+    const TrackedFrame a = itself.AddFrame(images);
+    FrameCorners detected = DetectFrameCorners(images, options.harris);
+    ASSERT_EQ(detected.prepared.size(), 2u);
+    EXPECT_EQ(detected.prepared[0].cols, 267);  // 400 / 1.5
+    const TrackedFrame b = ahead.AddDetectedFrame(std::move(detected));
+    ASSERT_GT(a.observations.size(), 100u);
+    ASSERT_EQ(a.observations.size(), b.observations.size()) << "frame " << f;
+    EXPECT_EQ(a.num_corners, b.num_corners);
+    EXPECT_EQ(a.num_matched, b.num_matched);
+    if (f > 0) {
+      EXPECT_GT(a.num_matched, 100);
+    }
+    for (size_t i = 0; i < a.observations.size(); ++i) {
+      EXPECT_EQ(a.observations[i].track, b.observations[i].track);
+      EXPECT_EQ(a.observations[i].camera, b.observations[i].camera);
+      EXPECT_EQ(a.observations[i].bearing, b.observations[i].bearing);
+      EXPECT_EQ(a.pixels[i], b.pixels[i]);
+    }
+  }
+  EXPECT_GT(itself.StageTimings().detect, 0.0);
+  EXPECT_EQ(itself.StageTimings().detect_ahead, 0.0);
+  EXPECT_EQ(ahead.StageTimings().detect, 0.0);
+  EXPECT_GT(ahead.StageTimings().detect_ahead, 0.0);
 }
 
 }  // namespace

@@ -232,6 +232,10 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
        queue_ms.empty() ? 0.0 : *std::max_element(queue_ms.begin(), queue_ms.end())},
       {"loop_closure", o.pipeline.sfm.loop_closure},
       {"surface_replay_seconds", result.replay_seconds},
+      {"surface_smoothing",
+       {{"every_keyframe", o.pipeline.sculptor.smoothing.every_keyframe},
+        {"at_extraction_seconds", result.final_smoothing.seconds},
+        {"at_extraction_vertices", result.final_smoothing.vertices}}},
   };
   summary.update(surface_fields);
   // The final bundle adjustment's replay is the one after the loop closures' replays.

@@ -298,6 +298,9 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   WritePlyPoints(StreamPoints(stream, point_colors), out / "points.ply");
   if (!keyframe_poses.empty()) WriteTum(keyframe_poses, out / "poses.tum");
 
+  // The smoothing that waited for the surface to be taken (SmoothingOptions::every_keyframe
+  // off), in the extractions above and the snapshots.
+  const IncrementalSculptor::DeferredSmoothing smoothing = sculptor.DeferredSmoothingStats();
   std::vector<double> ms;
   size_t max_e = 0, added = 0, rejected = 0;
   for (const KeyframeStats& st : stats) {
@@ -329,7 +332,8 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       "  observed: %zu triangles in %ld boundary loops, manifold with boundary %s; left out: "
       "%zu with a Steiner vertex, %zu long, %zu sparse, %zu unseen, %zu around touching "
       "boundaries, %zu in small components\n"
-      "  ms per incremental keyframe: median %.1f, p95 %.1f, max %.1f; max |E| %zu\n"
+      "  ms per incremental keyframe: median %.1f, p95 %.1f, max %.1f; max |E| %zu; smoothing "
+      "when the surface was taken: %.1f ms (%zu vertices)\n"
       "  wrote %s, %s and %s\n",
       stream.size(), added, rejected, 100.0 * rejected / std::max<size_t>(1, added + rejected),
       closed.triangles.size(), closed_report.ok ? "yes" : "NO", mesh.triangles.size(),
@@ -337,8 +341,8 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       observed_stats.long_edges, observed_stats.sparse, observed_stats.unseen,
       observed_stats.manifold_repair, observed_stats.small_components, Quantile(ms, 0.5),
       Quantile(ms, 0.95), ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()), max_e,
-      (out / "surface.ply").c_str(), (out / "surface_closed.ply").c_str(),
-      (out / "stats" / "keyframes.csv").c_str());
+      1e3 * smoothing.seconds, smoothing.vertices, (out / "surface.ply").c_str(),
+      (out / "surface_closed.ply").c_str(), (out / "stats" / "keyframes.csv").c_str());
   // The run's summary (docs/errors.md, rule 3: its warnings too), written last.
   const nlohmann::json summary = {
       {"input", o.colmap.empty() ? o.from_gt : o.colmap},
@@ -358,6 +362,11 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       {"closed_manifold", closed_report.ok},
       {"ms_median", Quantile(ms, 0.5)},
       {"ms_p95", Quantile(ms, 0.95)},
+      {"smoothing",
+       {{"every_keyframe", o.sculptor.smoothing.every_keyframe},
+        {"at_extraction_runs", smoothing.runs},
+        {"at_extraction_vertices", smoothing.vertices},
+        {"at_extraction_seconds", smoothing.seconds}}},
       {"max_cells_e", max_e},
       {"warnings", WarningsLogged()},
   };
@@ -417,6 +426,9 @@ void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOpti
 }
 
 void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
+  command->add_flag("--smooth-every-keyframe", sculptor->smoothing.every_keyframe,
+                    "Smooth δO after every keyframe (the paper's incremental smoothing; default: "
+                    "once, when the surface is taken at the end or for a snapshot)");
   command
       ->add_option("--min-aperture", sculptor->min_aperture_deg,
                    "Aperture filter: keep a point only when two of its rays are more than this "

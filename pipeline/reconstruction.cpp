@@ -174,6 +174,7 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
         record(sculptor->Finish());
         result.closed_mesh = sculptor->ExtractMesh(&result.closed_mesh_points);
         result.mesh = sculptor->ExtractObservedMesh(&result.mesh_points, &result.observed);
+        result.final_smoothing = sculptor->DeferredSmoothingStats();
         result.surface_seconds += SecondsSince(busy);
       }
     } catch (...) {

@@ -89,6 +89,9 @@ struct PipelineResult {
   std::vector<double> loop_replay_seconds;
   std::vector<size_t> loop_replay_keyframes;
   double replay_seconds = 0.0;  // surface time spent replaying after corrections
+  // The smoothing of the final surface when it waited for the end (SmoothingOptions::
+  // every_keyframe off), part of surface_seconds.
+  IncrementalSculptor::DeferredSmoothing final_smoothing;
 };
 
 // Runs the pipeline to the end of the drive. Throws InputError when every frame was skipped

@@ -211,6 +211,13 @@ struct IncrementalSculptor::Impl {
   std::vector<VertexHandle> new_vertices;  // inserted during the current keyframe
   std::vector<VertexHandle> touched;       // vertices of cells that changed side (SetInO)
   internal::SurfaceSmoother smoother;      // step 6: smoothed δO positions
+  // SmoothingOptions::every_keyframe off: the vertices (by index, each once: pending_flag)
+  // whose umbrella may have changed since the last smoothing, smoothed by SmoothPending when a
+  // mesh is taken; the mutex makes the const extractions safe to call from several threads.
+  std::vector<int> pending_smoothing;
+  std::vector<uint8_t> pending_flag;
+  IncrementalSculptor::DeferredSmoothing deferred_smoothing;
+  std::mutex smoothing_mutex;
   // Old rays (§4.4): the point of each ray id, the rays traced so far in their voxels (ids
   // below num_registered_rays), and a per-ray scratch stamp.
   std::vector<uint32_t> ray_point;
@@ -1463,6 +1470,11 @@ struct IncrementalSculptor::Impl {
     st.genus_euler_change = genus.euler_change;
     st.ms_genus = MsSince(tick);
     if (!options.smoothing.enabled) return;
+    if (!options.smoothing.every_keyframe) {
+      DeferSmoothing(active, vertices);
+      st.smoothing_candidates = pending_smoothing.size();
+      return;
+    }
     tick = Clock::now();
     if (vertices) {
       st.smoothing_candidates = vertices->size();
@@ -1477,6 +1489,51 @@ struct IncrementalSculptor::Impl {
     st.smoothing_prechecked = smoothing.prechecked;
     st.smoothing_rechecked = smoothing.rechecked;
     st.ms_smooth = MsSince(tick);
+  }
+
+  // Notes the vertices whose umbrella may have changed (`vertices`, else those of the cells of
+  // `active`) for SmoothPending.
+  void DeferSmoothing(const std::vector<CellHandle>& active,
+                      const std::vector<VertexHandle>* vertices) {
+    std::lock_guard<std::mutex> lock(smoothing_mutex);
+    auto note = [&](VertexHandle v) {
+      const int index = v->info().index;
+      if (index < 0) return;
+      if (static_cast<size_t>(index) >= pending_flag.size()) pending_flag.resize(index + 1, 0);
+      if (pending_flag[index]) return;
+      pending_flag[index] = 1;
+      pending_smoothing.push_back(index);
+    };
+    if (vertices) {
+      for (const VertexHandle& v : *vertices) note(v);
+      return;
+    }
+    for (const CellHandle& c : active) {
+      for (int i = 0; i < 4; ++i) {
+        if (!t.tri.is_infinite(c->vertex(i))) note(c->vertex(i));
+      }
+    }
+  }
+
+  // The smoothing of the vertices noted since the last one, all at once (no bounding ball).
+  void SmoothPending() {
+    std::lock_guard<std::mutex> lock(smoothing_mutex);
+    if (pending_smoothing.empty()) return;
+    const auto tick = Clock::now();
+    std::vector<VertexHandle> vertices;
+    vertices.reserve(pending_smoothing.size());
+    for (int index : pending_smoothing) {
+      vertices.push_back(t.vertices[index]);
+      pending_flag[index] = 0;
+    }
+    pending_smoothing.clear();
+    const internal::SmoothingResult result =
+        smoother.UpdateVertices(t, std::move(vertices), Eigen::Vector3d::Zero(),
+                                std::numeric_limits<double>::infinity(), options.smoothing);
+    ++deferred_smoothing.runs;
+    deferred_smoothing.vertices += result.vertices;
+    deferred_smoothing.rejected += result.rejected;
+    deferred_smoothing.seconds += 1e-3 * MsSince(tick);
   }
 
   std::vector<KeyframeStats> ProcessBuffered() {
@@ -1516,6 +1573,7 @@ std::vector<KeyframeStats> IncrementalSculptor::AddKeyframe(const SurfaceKeyfram
 std::vector<KeyframeStats> IncrementalSculptor::Finish() { return impl_->ProcessBuffered(); }
 
 TriangleMesh IncrementalSculptor::ExtractMesh(std::vector<PointId>* vertex_points) const {
+  impl_->SmoothPending();
   const Impl& m = *impl_;
   if (!vertex_points) {
     if (m.options.smoothing.enabled) return m.smoother.Extract(m.t);  // step 6
@@ -1538,6 +1596,7 @@ std::vector<PointId> IncrementalSculptor::InsertedPoints() const {
 
 TriangleMesh IncrementalSculptor::ExtractObservedMesh(std::vector<PointId>* vertex_points,
                                                       ObservedMeshStats* stats) const {
+  impl_->SmoothPending();
   const Impl& m = *impl_;
   std::vector<int> records;  // per vertex of δO: its index in m.points, -1 for Steiner
   const TriangleMesh closed = internal::ExtractBorderOfO(m.t, [&](VertexHandle v) {
@@ -1573,7 +1632,12 @@ void ColorMeshVertices(const std::vector<PointId>& vertex_points,
   }
 }
 Eigen::Vector3d IncrementalSculptor::SurfacePosition(int vertex) const {
+  impl_->SmoothPending();
   return impl_->smoother.Position(impl_->t.vertices.at(vertex));
+}
+IncrementalSculptor::DeferredSmoothing IncrementalSculptor::DeferredSmoothingStats() const {
+  std::lock_guard<std::mutex> lock(impl_->smoothing_mutex);
+  return impl_->deferred_smoothing;
 }
 const DelaunayMesh& IncrementalSculptor::triangulation() const { return impl_->mesh; }
 double IncrementalSculptor::scale() const { return impl_->s; }

@@ -75,6 +75,14 @@ struct GenusRefinementOptions {
 // incident triangle against its free side, or makes it meet a nearby δO triangle, is rejected.
 struct SmoothingOptions {
   bool enabled = true;
+  // When the smoothing runs. T keeps the SfM positions and the sculpting never reads the
+  // smoothed ones, so the smoothing can wait: off, each keyframe only notes the vertices whose
+  // umbrella may have changed, and they are smoothed together when a mesh or a position is
+  // taken from the sculptor (ExtractMesh, ExtractObservedMesh, SurfacePosition): once at the
+  // end of a run, or at each snapshot. On: every keyframe smooths its own vertices (the
+  // incremental smoothing of the paper), so that δO is smooth after each keyframe whatever
+  // the caller takes.
+  bool every_keyframe = false;
   int taubin_steps = 3;  // λ|μ pairs (Taubin, SIGGRAPH 1995: shrink-free low-pass smoothing)
   double lambda = 0.5;
   double mu = -0.53;
@@ -332,6 +340,13 @@ class IncrementalSculptor {
   std::vector<PointId> InsertedPoints() const;
   // The output position of the Delaunay vertex (DelaunayMesh index): smoothed, or its own.
   Eigen::Vector3d SurfacePosition(int vertex) const;
+  // The smoothing that waited for a mesh to be taken (SmoothingOptions::every_keyframe off):
+  // how often it ran, the vertices it recomputed and rejected moves, and its time, in total.
+  struct DeferredSmoothing {
+    size_t runs = 0, vertices = 0, rejected = 0;
+    double seconds = 0.0;
+  };
+  DeferredSmoothing DeferredSmoothingStats() const;
   const DelaunayMesh& triangulation() const;
   double scale() const;  // s, 0 until known
   // The mean distance between the first keyframes' centres, which s is measured from (0 until

@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -275,7 +276,8 @@ TEST_F(SurfaceCommandTest, SurfaceVerticesArePointsWithTheirColours) {
 }
 
 // Step 6: --no-genus-refinement and --no-smoothing switch each part off on the same
-// stream. Smoothing moves vertices only (same triangles, same vertex count); without refinement
+// stream, --smooth-every-keyframe smooths in the keyframes instead of once at the end.
+// Smoothing moves vertices only (same triangles, same vertex count); without refinement
 // no group is added and F ∩ E outside O is left as step 5 made it; each output is a closed
 // oriented 2-manifold.
 TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
@@ -294,6 +296,7 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
     return out;
   };
   const fs::path full = run("s6_full", {});
+  const fs::path every = run("s6_every", {"--smooth-every-keyframe"});
   const fs::path no_smooth = run("s6_no_smooth", {"--no-smoothing"});
   const fs::path none = run("s6_none", {"--no-smoothing", "--no-genus-refinement"});
   const TriangleMesh m_full = ReadPlyMesh(full / "surface_closed.ply");
@@ -310,6 +313,22 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
     moved += m_full.vertices[i] == m_no_smooth.vertices[i] ? 0 : 1;
   }
   EXPECT_GT(moved, m_full.vertices.size() / 4);
+  const TriangleMesh m_every = ReadPlyMesh(every / "surface_closed.ply");
+  EXPECT_TRUE(CheckMesh(m_every).ok);
+  EXPECT_EQ(m_every.triangles, m_full.triangles);
+  EXPECT_NE(m_every.vertices, m_full.vertices);
+  // By default the smoothing ran once, when the surface was taken; with
+  // --smooth-every-keyframe, in the keyframes (below).
+  const nlohmann::json smoothing =
+      nlohmann::json::parse(ReadTextFile(full / "surface.json")).at("smoothing");
+  EXPECT_FALSE(smoothing.at("every_keyframe").get<bool>());
+  EXPECT_EQ(smoothing.at("at_extraction_runs").get<int>(), 1);
+  EXPECT_GT(smoothing.at("at_extraction_vertices").get<int>(), 100);
+  EXPECT_EQ(nlohmann::json::parse(ReadTextFile(every / "surface.json"))
+                .at("smoothing")
+                .at("at_extraction_runs")
+                .get<int>(),
+            0);
   // The stats columns of step 6.
   const std::vector<std::string> columns = Split(kColumns, ',');
   auto sum = [&](const fs::path& out, const char* name) {
@@ -321,7 +340,9 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
     for (size_t i = 1; i < lines.size(); ++i) total += std::stod(Split(lines[i], ',').at(k));
     return total;
   };
-  EXPECT_GT(sum(full, "smoothed_vertices"), 0.0);
+  EXPECT_GT(sum(every, "smoothed_vertices"), 0.0);
+  EXPECT_EQ(sum(full, "smoothed_vertices"), 0.0);
+  EXPECT_GT(sum(full, "smoothing_candidates"), 0.0);
   EXPECT_EQ(sum(no_smooth, "smoothed_vertices"), 0.0);
   EXPECT_EQ(sum(none, "genus_groups"), 0.0);
   EXPECT_EQ(sum(none, "genus_free_before"), sum(none, "genus_free_after"));

@@ -1,7 +1,8 @@
 // Step 6 of paper §4.6, incremental smoothing: on a noisy street (flat walls and ground) and
 // inside a noisy sphere it brings the surface closer to the truth, never turns a triangle
 // against its free side nor makes two triangles intersect, moves no vertex outside the
-// keyframe's enclosing ball, and switched off gives the Delaunay positions.
+// keyframe's enclosing ball (when it runs every keyframe), waits for the surface to be taken
+// by default, and switched off gives the Delaunay positions.
 
 #include <gtest/gtest.h>
 
@@ -23,10 +24,12 @@ struct SculptRun {
   TriangleMesh smoothed, plain;  // ExtractMesh and the surface at the Delaunay positions
 };
 
-SculptRun Sculpt(const std::vector<SurfaceKeyframe>& drive, bool smoothing) {
+SculptRun Sculpt(const std::vector<SurfaceKeyframe>& drive, bool smoothing,
+                 bool every_keyframe = false) {
   SculptorOptions options;
   options.scale = 1.0;
   options.smoothing.enabled = smoothing;
+  options.smoothing.every_keyframe = every_keyframe;
   IncrementalSculptor sculptor(options);
   for (const SurfaceKeyframe& kf : drive) sculptor.AddKeyframe(kf);
   return {sculptor.ExtractMesh(), sculptor.triangulation().ExtractSurface()};
@@ -145,6 +148,66 @@ TEST(Smoothing, NoisyStreetWallsAndGroundGetCloserToTheTruth) {
   ExpectSameTrianglesNoFlipNoIntersection(on);
 }
 
+// Smoothing every keyframe (the paper's incremental smoothing) and once when the surface is
+// taken (the default) give surfaces as close to the truth, both clean.
+TEST(Smoothing, EveryKeyframeOrOnceAtTheEndAreAsCloseToTheTruth) {
+  const auto drive = testing::NoisyStreet(30, 120, 0.05, 5);
+  const SculptRun once = Sculpt(drive, true), every = Sculpt(drive, true, true);
+  ASSERT_EQ(once.plain.triangles, every.plain.triangles);
+  const auto distance = [](const Eigen::Vector3d& q) { return testing::StreetDistance(q); };
+  const double before = RmsError(once.plain, once.plain, distance, 0.25);
+  const double after_once = RmsError(once.smoothed, once.plain, distance, 0.25);
+  const double after_every = RmsError(every.smoothed, every.plain, distance, 0.25);
+  std::cout << "street: RMS distance to the walls/ground " << before << " m -> " << after_once
+            << " m smoothed once, " << after_every << " m smoothed every keyframe\n";
+  EXPECT_LT(after_every, 0.9 * before);
+  EXPECT_LT(after_once, 0.9 * before);
+  EXPECT_LT(after_once, 1.05 * after_every);
+  EXPECT_NE(once.smoothed.vertices, every.smoothed.vertices);  // two different runs
+  ExpectSameTrianglesNoFlipNoIntersection(every);
+  ExpectSameTrianglesNoFlipNoIntersection(once);
+}
+
+// By default the keyframes only note their vertices: no keyframe smooths, and the first mesh
+// taken smooths them all in one run; taking it again smooths nothing more; a mesh taken midway
+// (a snapshot) smooths what was noted until then, and the sculpting goes on from there.
+TEST(Smoothing, WaitsForTheSurfaceToBeTaken) {
+  const auto drive = testing::NoisyStreet(24, 100, 0.05, 21);
+  SculptorOptions options;
+  options.scale = 1.0;
+  ASSERT_FALSE(options.smoothing.every_keyframe);
+  IncrementalSculptor sculptor(options);
+  size_t candidates = 0, midway_runs = 0;
+  for (size_t k = 0; k < drive.size(); ++k) {
+    for (const KeyframeStats& st : sculptor.AddKeyframe(drive[k])) {
+      EXPECT_EQ(st.smoothed_vertices, 0u);
+      EXPECT_EQ(st.ms_smooth, 0.0);
+      candidates = st.smoothing_candidates;  // noted and waiting
+    }
+    if (k == drive.size() / 2) {
+      EXPECT_GT(candidates, 0u);
+      const TriangleMesh snapshot = sculptor.ExtractMesh();
+      midway_runs = sculptor.DeferredSmoothingStats().runs;
+      EXPECT_EQ(midway_runs, 1u);
+      EXPECT_GT(sculptor.DeferredSmoothingStats().vertices, 100u);
+      EXPECT_EQ(CountIntersectingPairs(snapshot), 0u);
+    }
+  }
+  const TriangleMesh first = sculptor.ExtractMesh();
+  const IncrementalSculptor::DeferredSmoothing after = sculptor.DeferredSmoothingStats();
+  EXPECT_EQ(after.runs, midway_runs + 1);
+  EXPECT_GT(after.seconds, 0.0);
+  const TriangleMesh second = sculptor.ExtractMesh();
+  EXPECT_EQ(sculptor.DeferredSmoothingStats().runs, after.runs);  // nothing left to smooth
+  EXPECT_EQ(first.vertices, second.vertices);
+  ExpectSameTrianglesNoFlipNoIntersection({first, sculptor.triangulation().ExtractSurface()});
+  size_t moved = 0;
+  const TriangleMesh plain = sculptor.triangulation().ExtractSurface();
+  for (size_t i = 0; i < first.vertices.size(); ++i)
+    moved += first.vertices[i] != plain.vertices[i];
+  EXPECT_GT(moved, first.vertices.size() / 2);
+}
+
 TEST(Smoothing, NoisySphereGetsCloserToTheTruth) {
   constexpr double kRadius = 8.0;
   const auto drive = testing::NoisySphere(14, 150, kRadius, 0.05, 9);
@@ -167,6 +230,7 @@ TEST(Smoothing, MovesNoVertexOutsideTheKeyframeBall) {
   options.scale = 1.0;
   options.steiner_step_factor = 4.0;
   options.max_ray_length_factor = 12.0;
+  options.smoothing.every_keyframe = true;
   const double radius = 12.0 + 4.0 * std::sqrt(3.0);
   IncrementalSculptor sculptor(options);
   std::vector<Eigen::Vector3d> previous;
@@ -209,6 +273,7 @@ void ExpectFastChecksMatchReference(const std::vector<SurfaceKeyframe>& drive, d
   fast.scale = 1.0;
   fast.steiner_step_factor = 4.0;
   fast.max_ray_length_factor = radius;
+  fast.smoothing.every_keyframe = true;  // per keyframe counts to compare
   SculptorOptions reference = fast;
   reference.smoothing.reference_checks = true;
   IncrementalSculptor a(fast), b(reference);

@@ -430,6 +430,10 @@ void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
                     "Smooth δO after every keyframe (the paper's incremental smoothing; default: "
                     "once, when the surface is taken at the end or for a snapshot)");
   command
+      ->add_option("--smoothing-steps", sculptor->smoothing.taubin_steps,
+                   "Taubin λ|μ pairs of the smoothing of δO (0: peak removal only)")
+      ->capture_default_str();
+  command
       ->add_option("--min-aperture", sculptor->min_aperture_deg,
                    "Aperture filter: keep a point only when two of its rays are more than this "
                    "many degrees apart (its triangulation angle)")

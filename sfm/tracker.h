@@ -40,9 +40,11 @@ struct TrackerOptions {
   BundleAdjustmentOptions bundle_adjustment;  // its mode follows `central`
   int num_free_keyframes = 3;                 // the newest n keyframes are free
   int num_fixed_keyframes = 7;                // and the N before them fixed (7–10)
-  // Threads of the global adjustment after a loop closure (a one-off solve of the whole map,
-  // the largest single cost of a closure: the SfM thread waits for it).
-  int global_bundle_adjustment_threads = 2;
+  // Threads of the global adjustments (after a loop closure, at the end: one-off solves of the
+  // whole map, the SfM thread waits for them). With more than one, Ceres sums the reduced
+  // system's blocks in the order its threads reach them, so the map differs in its last bits
+  // from run to run and the runs drift apart: one keeps a run repeatable.
+  int global_bundle_adjustment_threads = 1;
   // The global adjustments (after a loop closure, at the end) stop when an iteration lowers the
   // cost by less than this share (Ceres's function_tolerance; the local adjustments keep
   // bundle_adjustment.function_tolerance): 1e-8 took 13 iterations on the paper drive's 485

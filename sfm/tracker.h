@@ -94,6 +94,10 @@ struct TrackerOptions {
   // search: the frame's first resection, taken when it keeps at least its inliers.
   double resection_prior_share = 1.0;
   bool resection_prior_after_search = false;
+  // Non-central mode: the resection's RANSAC draws its hypotheses with the central P3P on the
+  // bearings seen from the cameras' mean centre, and scores and refines them with the true
+  // offsets (NoncentralAbsolutePoseOptions::central_hypotheses), instead of GP3P.
+  bool noncentral_resection_central_hypotheses = false;
   // Never a silently wrong map: a resected centre farther from the constant-velocity
   // prediction than max_jump_ratio times a step (the larger of the last step and the mean step
   // so far) times the frames since the last tracked one is rejected as a wrong pose.

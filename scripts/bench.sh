@@ -14,9 +14,9 @@
 #                    gives the ratios A / B of the medians
 #   --rounds N       runs of every case per build (default 1, 2 with --compare)
 #   --cases LIST     comma-separated, from (default: reconstruct,reconstruct_nc,sfm,surface)
-#                      reconstruct     omnisculpt reconstruct on demo (central, the drive's rig)
+#                      reconstruct     omnisculpt reconstruct --central on demo
 #                      reconstruct_nc  the same with --non-central (the rig's true offsets)
-#                      sfm             omnisculpt sfm on demo (central)
+#                      sfm             omnisculpt sfm --central on demo
 #                      sfm_nc          omnisculpt sfm --non-central on demo
 #                      sfm_car         omnisculpt sfm on short with the car rig (non-central:
 #                                      1-1.5 m offsets)
@@ -130,9 +130,9 @@ run_case() {  # build label case round
   local b="$1" label="$2" c="$3" r="$4"
   local omni="$b/omnisculpt" folder="$out/${label}_${c}_${r}" drive args=()
   case "$c" in
-    reconstruct) drive="$drives/demo"; args=(reconstruct "$drive" --out "$folder") ;;
+    reconstruct) drive="$drives/demo"; args=(reconstruct "$drive" --central --out "$folder") ;;
     reconstruct_nc) drive="$drives/demo"; args=(reconstruct "$drive" --non-central --out "$folder") ;;
-    sfm) drive="$drives/demo"; args=(sfm "$drive" --out "$folder") ;;
+    sfm) drive="$drives/demo"; args=(sfm "$drive" --central --out "$folder") ;;
     sfm_nc) drive="$drives/demo"; args=(sfm "$drive" --non-central --out "$folder") ;;
     sfm_car) drive="$drives/short_car"; args=(sfm "$drive" --out "$folder") ;;
     surface) drive="$drives/demo"; args=(surface --from-gt "$drive" --out "$folder") ;;

@@ -49,7 +49,7 @@ for k in range(5):
 cameras.append(camera("cam5", [0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0],
                       [0.0, 0.0, TOP_HEIGHT_M]))
 
-rig = {"name": "ladybug-like", "central": True, "cameras": cameras}
+rig = {"name": "ladybug-like", "central": False, "cameras": cameras}
 out = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data", "rigs",
                    "ladybug-like.json")
 with open(out, "w") as f:

@@ -1,6 +1,7 @@
 #include "sfm/absolute_pose_noncentral.h"
 
 #include <cassert>
+#include <opengv/absolute_pose/CentralAbsoluteAdapter.hpp>
 #include <opengv/absolute_pose/NoncentralAbsoluteAdapter.hpp>
 #include <opengv/sac_problems/absolute_pose/AbsolutePoseSacProblem.hpp>
 
@@ -24,15 +25,29 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
   opengv::translations_t cam_offsets;
   opengv::rotations_t cam_rotations;
   internal::ToOpengvRig(rig, &cam_offsets, &cam_rotations);
-  opengv::absolute_pose::NoncentralAbsoluteAdapter adapter(f, cameras, points, cam_offsets,
-                                                           cam_rotations);
-  auto problem = std::make_shared<Problem>(adapter, Problem::GP3P, /*randomSeed=*/false);
   opengv::transformation_t model;
   const internal::AbsolutePoseScorer scorer(bearings, points_in_world, &cameras, &cam_rotations,
                                             &cam_offsets);
-  const RansacResult result = internal::RunAbsolutePoseRansac(
-      problem, scorer, internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac,
-      &model, prior);
+  const double threshold = internal::AngleToOpengvScore(options.ransac.max_angle_error);
+  RansacResult result;
+  if (options.central_hypotheses) {
+    // The bearings in the rig's axes, from the mean camera centre.
+    opengv::bearingVectors_t rig_bearings(f.size());
+    for (size_t i = 0; i < f.size(); ++i) rig_bearings[i] = cam_rotations[cameras[i]] * f[i];
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (const opengv::translation_t& offset : cam_offsets) centre += offset;
+    centre /= static_cast<double>(cam_offsets.size());
+    opengv::absolute_pose::CentralAbsoluteAdapter adapter(rig_bearings, points);
+    auto problem = std::make_shared<Problem>(adapter, Problem::KNEIP, /*randomSeed=*/false);
+    result = internal::RunAbsolutePoseRansac(problem, scorer, threshold, options.ransac, &model,
+                                             prior, &centre);
+  } else {
+    opengv::absolute_pose::NoncentralAbsoluteAdapter adapter(f, cameras, points, cam_offsets,
+                                                             cam_rotations);
+    auto problem = std::make_shared<Problem>(adapter, Problem::GP3P, /*randomSeed=*/false);
+    result =
+        internal::RunAbsolutePoseRansac(problem, scorer, threshold, options.ransac, &model, prior);
+  }
   if (result.success) *world_from_rig = internal::FromOpengvTransformation(model);
   return result;
 }

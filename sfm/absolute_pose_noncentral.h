@@ -1,7 +1,7 @@
 #pragma once
 // Absolute pose (resection) of a non-central rig from bearing-to-point correspondences with the
-// rig's true cam_from_rig offsets: GP3P (Kneip, through OpenGV) in RANSAC, refined on the
-// inliers.
+// rig's true cam_from_rig offsets: GP3P (Kneip, through OpenGV) in RANSAC, or the central P3P's
+// hypotheses scored with the offsets, refined on the inliers with the offsets.
 
 #include <Eigen/Core>
 #include <string>
@@ -15,6 +15,11 @@ namespace omni {
 
 struct NoncentralAbsolutePoseOptions {
   RansacOptions ransac;
+  // The RANSAC's hypotheses from the central P3P on the bearings turned into the rig's axes, as
+  // seen from the cameras' mean centre (a far cheaper minimal solver than GP3P), each scored
+  // with the true offsets; the best one refined on its inliers with the true offsets, and its
+  // inliers selected again. False: GP3P with the true offsets.
+  bool central_hypotheses = false;
 
   std::string Check() const {
     const std::string problem = ransac.Check();

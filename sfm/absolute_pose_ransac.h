@@ -222,11 +222,16 @@ constexpr int kMaxHypothesisBatch = 16;
 
 using AbsolutePoseProblem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
 
+// `hypothesis_centre`: when given, the problem's hypotheses are poses of a frame with the rig's
+// axes at this point of the rig (a central solver on bearings from one centre), taken to
+// world_from_rig before they are scored; the scorer, the refinement and the model are the
+// rig's.
 inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProblem>& problem,
                                           const AbsolutePoseScorer& scorer, double threshold,
                                           const RansacOptions& options,
                                           opengv::transformation_t* model,
-                                          const PosePrior* prior = nullptr) {
+                                          const PosePrior* prior = nullptr,
+                                          const Eigen::Vector3d* hypothesis_centre = nullptr) {
   RansacResult result;
   const size_t num_correspondences = scorer.size();
   result.inlier_mask.assign(num_correspondences, 0);
@@ -280,6 +285,8 @@ inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProb
                       [&](const tbb::blocked_range<int>& range) {
                         for (int j = range.begin(); j != range.end(); ++j) {
                           solved[j] = problem->computeModelCoefficients(samples[j], models[j]);
+                          if (solved[j] && hypothesis_centre != nullptr)
+                            models[j].col(3) -= models[j].block<3, 3>(0, 0) * *hypothesis_centre;
                           counts[j] = solved[j] ? scorer.Count(models[j], threshold, bound) : 0;
                         }
                       });

@@ -173,16 +173,30 @@ double RmsAngle(const Rig& rig, const BundleAdjustmentOptions& options,
   return std::sqrt(sum / problem.observations.size());
 }
 
+// A keyframe's parameters: its rotation (Eigen quaternion x y z w), then its translation.
+constexpr size_t kRotationParameters = 4;
+constexpr size_t kPoseParameters = kRotationParameters + 3;
+
 // One Ceres solve over the current observations. Returns false when Ceres reports no usable
 // solution.
 bool Solve(const Rig& rig, const BundleAdjustmentOptions& options, BundleAdjustmentProblem* problem,
            BundleAdjustmentSummary* summary) {
   // Ceres parameter blocks: quaternion (x y z w) and translation per keyframe; points in place.
-  std::vector<Eigen::Vector4d> rotations(problem->keyframes.size());
-  std::vector<Eigen::Vector3d> translations(problem->keyframes.size());
-  for (size_t i = 0; i < problem->keyframes.size(); ++i) {
-    rotations[i] = problem->keyframes[i].world_from_rig.rotation.normalized().coeffs();
-    translations[i] = problem->keyframes[i].world_from_rig.translation;
+  // Ceres orders the blocks of one elimination group by their addresses, and that order sets
+  // the order of the sums of its linear algebra: the keyframes' blocks and the offset scale
+  // live in one array, in keyframe order, and the points in theirs, so that the solution does
+  // not depend, to the last bit, on where the allocator put them.
+  const size_t num_keyframes = problem->keyframes.size();
+  std::vector<double> camera_parameters(kPoseParameters * num_keyframes + 1);
+  const auto rotation_of = [&](size_t i) { return &camera_parameters[kPoseParameters * i]; };
+  const auto translation_of = [&](size_t i) {
+    return &camera_parameters[kPoseParameters * i + kRotationParameters];
+  };
+  for (size_t i = 0; i < num_keyframes; ++i) {
+    Eigen::Map<Eigen::Vector4d>(rotation_of(i)) =
+        problem->keyframes[i].world_from_rig.rotation.normalized().coeffs();
+    Eigen::Map<Eigen::Vector3d>(translation_of(i)) =
+        problem->keyframes[i].world_from_rig.translation;
   }
 
   ceres::Problem::Options problem_options;
@@ -192,20 +206,20 @@ bool Solve(const Rig& rig, const BundleAdjustmentOptions& options, BundleAdjustm
   std::vector<char> keyframe_used(problem->keyframes.size(), 0);
   std::vector<char> point_used(problem->points_in_world.size(), 0);
   const bool scaled = EstimatesOffsetScale(options);
-  double offset_scale = summary->offset_scale;
+  double* offset_scale = &camera_parameters[kPoseParameters * num_keyframes];
+  *offset_scale = summary->offset_scale;
   for (const BundleAdjustmentObservation& observation : problem->observations) {
     const ObservationFrame frame =
         MakeObservationFrame(rig, options.mode, center, observation.camera, observation.bearing);
     if (scaled)
       ceres_problem.AddResidualBlock(
           ScaledOffsetAngularResidual::Create(frame), MakeLoss(options),
-          rotations[observation.keyframe].data(), translations[observation.keyframe].data(),
-          problem->points_in_world[observation.point].data(), &offset_scale);
+          rotation_of(observation.keyframe), translation_of(observation.keyframe),
+          problem->points_in_world[observation.point].data(), offset_scale);
     else
-      ceres_problem.AddResidualBlock(AngularResidual::Create(frame), MakeLoss(options),
-                                     rotations[observation.keyframe].data(),
-                                     translations[observation.keyframe].data(),
-                                     problem->points_in_world[observation.point].data());
+      ceres_problem.AddResidualBlock(
+          AngularResidual::Create(frame), MakeLoss(options), rotation_of(observation.keyframe),
+          translation_of(observation.keyframe), problem->points_in_world[observation.point].data());
     keyframe_used[observation.keyframe] = 1;
     point_used[observation.point] = 1;
   }
@@ -213,19 +227,19 @@ bool Solve(const Rig& rig, const BundleAdjustmentOptions& options, BundleAdjustm
 
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
   if (scaled) {
-    ceres_problem.SetParameterLowerBound(&offset_scale, 0, options.offset_scale / 100.0);
-    ceres_problem.SetParameterUpperBound(&offset_scale, 0, options.offset_scale * 100.0);
-    ordering->AddElementToGroup(&offset_scale, 1);
+    ceres_problem.SetParameterLowerBound(offset_scale, 0, options.offset_scale / 100.0);
+    ceres_problem.SetParameterUpperBound(offset_scale, 0, options.offset_scale * 100.0);
+    ordering->AddElementToGroup(offset_scale, 1);
   }
-  for (size_t i = 0; i < problem->keyframes.size(); ++i) {
+  for (size_t i = 0; i < num_keyframes; ++i) {
     if (!keyframe_used[i]) continue;
-    ceres_problem.SetManifold(rotations[i].data(), new ceres::EigenQuaternionManifold);
+    ceres_problem.SetManifold(rotation_of(i), new ceres::EigenQuaternionManifold);
     if (problem->keyframes[i].fixed) {
-      ceres_problem.SetParameterBlockConstant(rotations[i].data());
-      ceres_problem.SetParameterBlockConstant(translations[i].data());
+      ceres_problem.SetParameterBlockConstant(rotation_of(i));
+      ceres_problem.SetParameterBlockConstant(translation_of(i));
     }
-    ordering->AddElementToGroup(rotations[i].data(), 1);
-    ordering->AddElementToGroup(translations[i].data(), 1);
+    ordering->AddElementToGroup(rotation_of(i), 1);
+    ordering->AddElementToGroup(translation_of(i), 1);
   }
   for (size_t i = 0; i < problem->points_in_world.size(); ++i) {
     if (!point_used[i]) continue;
@@ -252,11 +266,12 @@ bool Solve(const Rig& rig, const BundleAdjustmentOptions& options, BundleAdjustm
   if (summary->initial_cost == 0.0) summary->initial_cost = ceres_summary.initial_cost;
   summary->final_cost = ceres_summary.final_cost;
   if (!ceres_summary.IsSolutionUsable()) return false;
-  if (scaled) summary->offset_scale = offset_scale;
-  for (size_t i = 0; i < problem->keyframes.size(); ++i) {
+  if (scaled) summary->offset_scale = *offset_scale;
+  for (size_t i = 0; i < num_keyframes; ++i) {
     if (problem->keyframes[i].fixed || !keyframe_used[i]) continue;
     problem->keyframes[i].world_from_rig =
-        Rigid3d(Eigen::Quaterniond(rotations[i]).normalized(), translations[i]);
+        Rigid3d(Eigen::Quaterniond(rotation_of(i)).normalized(),
+                Eigen::Map<const Eigen::Vector3d>(translation_of(i)));
   }
   return true;
 }

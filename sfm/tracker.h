@@ -40,9 +40,11 @@ struct TrackerOptions {
   BundleAdjustmentOptions bundle_adjustment;  // its mode follows `central`
   int num_free_keyframes = 3;                 // the newest n keyframes are free
   int num_fixed_keyframes = 7;                // and the N before them fixed (7–10)
-  // Threads of the global adjustment after a loop closure (a one-off solve of the whole map,
-  // the largest single cost of a closure: the SfM thread waits for it).
-  int global_bundle_adjustment_threads = 2;
+  // Threads of the global adjustments (after a loop closure, at the end: one-off solves of the
+  // whole map, the SfM thread waits for them). With more than one, Ceres sums the reduced
+  // system's blocks in the order its threads reach them, so the map differs in its last bits
+  // from run to run and the runs drift apart: one keeps a run repeatable.
+  int global_bundle_adjustment_threads = 1;
   // The global adjustments (after a loop closure, at the end) stop when an iteration lowers the
   // cost by less than this share (Ceres's function_tolerance; the local adjustments keep
   // bundle_adjustment.function_tolerance): 1e-8 took 13 iterations on the paper drive's 485
@@ -92,6 +94,10 @@ struct TrackerOptions {
   // search: the frame's first resection, taken when it keeps at least its inliers.
   double resection_prior_share = 1.0;
   bool resection_prior_after_search = false;
+  // Non-central mode: the resection's RANSAC draws its hypotheses with the central P3P on the
+  // bearings seen from the cameras' mean centre, and scores and refines them with the true
+  // offsets (NoncentralAbsolutePoseOptions::central_hypotheses), instead of GP3P.
+  bool noncentral_resection_central_hypotheses = false;
   // Never a silently wrong map: a resected centre farther from the constant-velocity
   // prediction than max_jump_ratio times a step (the larger of the last step and the mean step
   // so far) times the frames since the last tracked one is rejected as a wrong pose.

@@ -112,7 +112,7 @@ TEST(RigJson, SampleLadybugRigReadsAndRoundTrips) {
       std::filesystem::path(OMNI_SOURCE_DIR) / "data" / "rigs" / "ladybug-like.json";
   const Rig rig = ReadRigJson(path);
   EXPECT_EQ(rig.name, "ladybug-like");
-  EXPECT_TRUE(rig.central);
+  EXPECT_FALSE(rig.central);
   ASSERT_EQ(rig.NumCameras(), 6u);
   const Json json = Json::parse(testing::ReadBytes(path));
   for (size_t i = 0; i < 6; ++i) {

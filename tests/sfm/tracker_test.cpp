@@ -811,3 +811,61 @@ TEST(TrackerOptionsCheck, TheGlobalAdjustmentToleranceIsAShareOfTheCost) {
 
 }  // namespace
 }  // namespace omni
+
+namespace omni {
+namespace {
+
+// Poses and points of a run of the tracker over a drive, ended by the global adjustment.
+struct TrackerRun {
+  std::vector<Rigid3d> keyframe_poses;
+  std::vector<int> keyframe_frames;
+  std::vector<Rigid3d> frame_poses;
+  int points = 0;
+};
+
+TrackerRun RunTracker(const SyntheticDrive& drive, const TrackerOptions& options) {
+  Tracker tracker(drive.rig, options);
+  TrackerRun run;
+  for (const std::vector<TrackObservation>& frame : drive.frames)
+    run.frame_poses.push_back(tracker.AddFrame(frame).world_from_rig);
+  tracker.Finish();
+  EXPECT_TRUE(tracker.GlobalBundleAdjust().success);
+  run.keyframe_poses = tracker.KeyframePoses();
+  run.keyframe_frames = tracker.KeyframeFrames();
+  run.points = tracker.NumPoints();
+  return run;
+}
+
+// Two runs of the tracker over the same drive give the same keyframes, poses and points to the
+// last bit, whatever the threads did and wherever the allocator put things (the second run
+// after blocks of many sizes were allocated and every other one freed).
+class TrackerRepeatabilityTest : public ::testing::TestWithParam<Case> {};
+
+TEST_P(TrackerRepeatabilityTest, TwoRunsGiveTheSamePosesToTheLastBit) {
+  const SyntheticDrive drive = MakeDrive(GetParam().rig_radius, 40, 0.0005, 0.03);
+  TrackerOptions options;
+  options.central = GetParam().central;
+  const TrackerRun first = RunTracker(drive, options);
+  std::vector<std::vector<char>> blocks;
+  for (int i = 0; i < 2000; ++i) blocks.emplace_back(16 + 8 * (i % 300), 1);
+  for (size_t i = 0; i < blocks.size(); i += 2) blocks[i] = std::vector<char>();
+  const TrackerRun second = RunTracker(drive, options);
+  ASSERT_GE(first.keyframe_poses.size(), 4u);
+  EXPECT_EQ(first.points, second.points);
+  ASSERT_EQ(first.keyframe_frames, second.keyframe_frames);
+  for (size_t k = 0; k < first.keyframe_poses.size(); ++k) {
+    EXPECT_EQ(first.keyframe_poses[k].rotation.coeffs(), second.keyframe_poses[k].rotation.coeffs())
+        << "keyframe " << k;
+    EXPECT_EQ(first.keyframe_poses[k].translation, second.keyframe_poses[k].translation)
+        << "keyframe " << k;
+  }
+  ASSERT_EQ(first.frame_poses.size(), second.frame_poses.size());
+  for (size_t f = 0; f < first.frame_poses.size(); ++f)
+    EXPECT_EQ(first.frame_poses[f].translation, second.frame_poses[f].translation) << "frame " << f;
+}
+
+INSTANTIATE_TEST_SUITE_P(Modes, TrackerRepeatabilityTest,
+                         ::testing::Values(Case{true, 0.05}, Case{false, 0.3}));
+
+}  // namespace
+}  // namespace omni

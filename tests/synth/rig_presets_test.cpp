@@ -80,7 +80,7 @@ TEST(RigPresetTest, EveryPresetParsesAndIsTheFileOfDataRigs) {
 TEST(RigPresetTest, LadybugIsTheUnchangedDefault) {
   const Rig rig = RigPresetRig("ladybug");
   EXPECT_EQ(rig.name, "ladybug-like");
-  EXPECT_TRUE(rig.central);
+  EXPECT_FALSE(rig.central);  // its 4-6 cm offsets: the SfM's non-central mode by default
   ASSERT_EQ(rig.NumCameras(), 6u);
   for (const Camera& camera : rig.cameras) {
     EXPECT_EQ(camera.width, 384);

@@ -58,6 +58,10 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                     "After a loop closure, correct with the pose graph only");
   command->add_flag("!--no-final-ba", o->sfm.final_bundle_adjustment,
                     "No global bundle adjustment when the drive ends");
+  command->add_flag("!--final-ba-whole-map", o->sfm.final_bundle_adjustment_tail,
+                    "The final adjustment frees every keyframe, even right after a loop "
+                    "closure's global adjustment (default: then only the keyframes since and "
+                    "the local window before them)");
   command->add_flag("--final-ba-true-offsets", o->sfm.final_bundle_adjustment_true_offsets,
                     "Central mode: the final adjustment with the cameras' true offsets, their "
                     "scale estimated (default: the central approximation)");

@@ -73,6 +73,8 @@ std::string SfmRunnerOptions::Check() const {
   if (max_frames < 0) return "max_frames: expected 0 (all) or more";
   if (!(usable_tracked_frames_share >= 0.0 && usable_tracked_frames_share <= 1.0))
     return "usable_tracked_frames_share: expected a share in [0, 1]";
+  if (!(final_bundle_adjustment_tail_share >= 0.0 && final_bundle_adjustment_tail_share <= 1.0))
+    return "final_bundle_adjustment_tail_share: expected a share in [0, 1]";
   if (!(final_bundle_adjustment_merge_angle >= 0.0 && final_bundle_adjustment_merge_angle < 0.1))
     return "final_bundle_adjustment_merge_angle: expected 0 (none) or an angle below 0.1 rad";
   if (const std::string check = final_frame_refinement_checks.Check(); !check.empty())
@@ -122,6 +124,18 @@ void ConfigureAllocatorForSfm() {
     mallopt(M_TRIM_THRESHOLD, 512 << 20);
   });
 #endif
+}
+
+int FinalAdjustmentFirstFreeKeyframe(const SfmRunnerOptions& options, int num_keyframes,
+                                     int keyframes_at_global_adjustment) {
+  if (!options.final_bundle_adjustment_tail || keyframes_at_global_adjustment <= 0 ||
+      keyframes_at_global_adjustment > num_keyframes)
+    return 0;
+  const int window = options.tracker.num_free_keyframes + options.tracker.num_fixed_keyframes;
+  const int first_free = keyframes_at_global_adjustment - window;
+  if (first_free <= 0) return 0;
+  const int free = num_keyframes - first_free;
+  return free <= options.final_bundle_adjustment_tail_share * num_keyframes ? first_free : 0;
 }
 
 SfmFrameSource DriveFrameSource(const Drive& drive) {
@@ -403,20 +417,28 @@ SfmRunResult SfmRunner::Finish() {
   if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {
     const auto ba_start = Clock::now();
     int points_merged = 0;
-    const BundleAdjustmentSummary summary =
-        s.tracker.GlobalBundleAdjust(s.options.final_bundle_adjustment_true_offsets,
-                                     s.options.final_bundle_adjustment_merge_angle, &points_merged);
+    const int keyframes_at_global_adjustment = s.tracker.KeyframesAtLastGlobalAdjustment();
+    const int first_free = FinalAdjustmentFirstFreeKeyframe(s.options, s.tracker.NumKeyframes(),
+                                                            keyframes_at_global_adjustment);
+    const BundleAdjustmentSummary summary = s.tracker.GlobalBundleAdjust(
+        s.options.final_bundle_adjustment_true_offsets,
+        s.options.final_bundle_adjustment_merge_angle, &points_merged, first_free);
     result.final_bundle_adjustment_seconds = SecondsSince(ba_start);
     if (summary.success) {
       result.final_rms_angle_before = summary.rms_angle_before;
       result.final_rms_angle_after = summary.rms_angle_after;
+      result.final_free_keyframes = s.tracker.NumKeyframes() - first_free;
       s.HandOverCorrectedMap();
       spdlog::info(
-          "sfm: final bundle adjustment of {} keyframes in {:.2f} s: RMS angle {:.4f} -> "
+          "sfm: final bundle adjustment of {} keyframes ({}) in {:.2f} s: RMS angle {:.4f} -> "
           "{:.4f} degrees, {} iterations, {} outliers, {} points fused; camera offsets {}",
-          result.keyframes.size(), result.final_bundle_adjustment_seconds,
-          summary.rms_angle_before * 180.0 / M_PI, summary.rms_angle_after * 180.0 / M_PI,
-          summary.num_iterations, summary.removed_observations.size(), points_merged,
+          result.keyframes.size(),
+          first_free > 0 ? fmt::format("the last {} free, since the global adjustment at {}",
+                                       result.final_free_keyframes, keyframes_at_global_adjustment)
+                         : std::string("all free"),
+          result.final_bundle_adjustment_seconds, summary.rms_angle_before * 180.0 / M_PI,
+          summary.rms_angle_after * 180.0 / M_PI, summary.num_iterations,
+          summary.removed_observations.size(), points_merged,
           s.options.tracker.central && s.options.final_bundle_adjustment_true_offsets
               ? fmt::format("true, {:.3f} map units per metre", summary.offset_scale)
               : std::string(s.options.tracker.central ? "none (central)" : "true, metric"));

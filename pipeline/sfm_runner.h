@@ -41,6 +41,13 @@ struct SfmRunnerOptions {
   // keyframes fixed), and the corrected map handed over again (map_corrected), as after a loop
   // closure.
   bool final_bundle_adjustment = true;
+  // When a global adjustment (after a loop closure) ran late in the drive, the final one frees
+  // only the keyframes added since and the local window before them (as many as the tracker's
+  // free and fixed keyframes), the older ones held fixed: a tail adjustment, when that is at most
+  // final_bundle_adjustment_tail_share of the keyframes. The keyframes before the window have not
+  // moved since they were adjusted with the whole map. False: always the whole map.
+  bool final_bundle_adjustment_tail = true;
+  double final_bundle_adjustment_tail_share = 0.5;
   // Central mode: the final adjustment uses the cameras' true offsets at a scale it estimates
   // (Tracker::GlobalBundleAdjust), not the central approximation of the rest of the run. Off:
   // on the tiny and short drives it took the keyframes' ATE 13 % and 4 % lower but made the
@@ -179,6 +186,8 @@ struct SfmRunResult {
   // (radians) before and after it; 0 when it did not run.
   double final_bundle_adjustment_seconds = 0.0;
   double final_rms_angle_before = 0.0, final_rms_angle_after = 0.0;
+  // The keyframes it left free (all but the gauge, or a tail: final_bundle_adjustment_tail).
+  int final_free_keyframes = 0;
   // SfmRunnerOptions::final_frame_refinement: its time, the frames it tried (tracked, not
   // keyframes) and those whose refined pose was taken.
   double final_frame_refinement_seconds = 0.0;
@@ -196,6 +205,13 @@ struct SfmFrameSource {
 };
 // The grey images and frame names of `drive`, which must outlive the source.
 SfmFrameSource DriveFrameSource(const Drive& drive);
+
+// The first keyframe the final adjustment leaves free, 0 for the whole map (but the gauge):
+// with final_bundle_adjustment_tail, after a global adjustment when the map had
+// keyframes_at_global_adjustment keyframes (0: none), the local window before those and every
+// keyframe since, when that is at most final_bundle_adjustment_tail_share of num_keyframes.
+int FinalAdjustmentFirstFreeKeyframe(const SfmRunnerOptions& options, int num_keyframes,
+                                     int keyframes_at_global_adjustment);
 
 struct SfmRunnerCallbacks {
   // On the runner's thread, in order: a keyframe that left the local window (its pose and

@@ -116,6 +116,9 @@ struct Tracker::Impl {
   Eigen::Vector3d central_center = Eigen::Vector3d::Zero();  // c0 in the rig frame
   int num_frames = 0;
   std::vector<Keyframe> keyframes;
+  // The number of keyframes when the last global adjustment succeeded (0: none since the map
+  // started).
+  int keyframes_at_global_adjustment = 0;
   std::vector<Point> points;
   std::unordered_map<int, int> track_to_point;
   std::vector<int> pending;  // live points not handed over yet (indices into points)
@@ -1206,6 +1209,7 @@ FrameResult Tracker::Impl::StartMap(const std::vector<TrackObservation>& observa
     revised.push_back({keyframes[0].frame, dropped});
   }
   keyframes.clear();
+  keyframes_at_global_adjustment = 0;
   ClearPoints();
   init_frames.clear();
   last_tracked.clear();
@@ -1655,7 +1659,7 @@ int MergeNearbyPoints(const Rig& rig, BundleAdjustmentOptions::Mode mode,
 }
 
 BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double merge_angle,
-                                                    int* points_merged) {
+                                                    int* points_merged, int first_free_keyframe) {
   Impl& m = *impl_;
   BundleAdjustmentOptions options = m.options.bundle_adjustment;
   options.mode = m.options.central ? BundleAdjustmentOptions::Mode::kCentral
@@ -1677,13 +1681,18 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double me
   }
   if (points_merged) *points_merged = merged;
   BundleAdjustmentProblem problem;
+  const int first_free = std::max(first_free_keyframe, m.GaugeKeyframes());
   for (size_t k = 0; k < m.keyframes.size(); ++k)
-    problem.keyframes.push_back(
-        {m.keyframes[k].world_from_rig, static_cast<int>(k) < m.GaugeKeyframes()});
+    problem.keyframes.push_back({m.keyframes[k].world_from_rig, static_cast<int>(k) < first_free});
   std::vector<int> point_of;
   for (size_t p = 0; p < m.points.size(); ++p) {
     const Impl::Point& point = m.points[p];
     if (!point.alive) continue;
+    // A tail adjustment leaves out the points that only fixed keyframes observe.
+    if (first_free_keyframe > 0 &&
+        std::none_of(point.observations.begin(), point.observations.end(),
+                     [&](const Impl::PointObservation& o) { return o.keyframe >= first_free; }))
+      continue;
     const int index = static_cast<int>(problem.points_in_world.size());
     problem.points_in_world.push_back(point.position);
     point_of.push_back(static_cast<int>(p));
@@ -1705,7 +1714,12 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double me
     m.keyframes[k].world_from_rig = problem.keyframes[k].world_from_rig;
   for (size_t i = 0; i < point_of.size(); ++i)
     m.points[point_of[i]].position = problem.points_in_world[i];
+  m.keyframes_at_global_adjustment = static_cast<int>(m.keyframes.size());
   return summary;
+}
+
+int Tracker::KeyframesAtLastGlobalAdjustment() const {
+  return impl_->keyframes_at_global_adjustment;
 }
 
 std::vector<FinalizedKeyframe> Tracker::FinalizedSnapshot(bool all_rays) const {

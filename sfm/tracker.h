@@ -324,8 +324,14 @@ class Tracker {
   // `merge_angle` > 0: first the points that are one place seen by two tracks are fused (two
   // points within merge_angle times their depth whose observations all fit one point within
   // merge_angle; *points_merged, if given, counts them).
+  // `first_free_keyframe` > 0: a tail adjustment; the keyframes before it are held fixed too,
+  // and the points that none of the free keyframes observes are left out.
   BundleAdjustmentSummary GlobalBundleAdjust(bool true_offsets = false, double merge_angle = 0.0,
-                                             int* points_merged = nullptr);
+                                             int* points_merged = nullptr,
+                                             int first_free_keyframe = 0);
+  // The number of keyframes the map had when the last global adjustment succeeded (0: none
+  // since the map started).
+  int KeyframesAtLastGlobalAdjustment() const;
   // A motion-only adjustment of tracked frame `frame` (not a keyframe; indices count the frames
   // given to AddFrame) from world_from_rig against the current map: the rig pose alone moves,
   // the points and keyframes stay, on the observations the frame kept

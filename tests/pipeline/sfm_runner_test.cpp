@@ -67,6 +67,30 @@ TEST(SfmRunnerOptions, BadOptionsAreReportedWithTheFieldInRelease) {
   EXPECT_THROW((SfmRunner{rig, options}), std::invalid_argument);
 }
 
+// The final adjustment frees the keyframes since the last global adjustment and the local
+// window before them, when they are few enough; the whole map otherwise.
+TEST(SfmRunnerOptions, FinalAdjustmentFreesTheTailSinceTheLastGlobalAdjustment) {
+  SfmRunnerOptions options;
+  const int window = options.tracker.num_free_keyframes + options.tracker.num_fixed_keyframes;
+  ASSERT_EQ(window, 10);
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 130), 120);
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 140), 130);
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 0), 0);    // no global adjustment
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 10), 0);   // the window reaches 0
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 80), 70);  // half the map: a tail
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 79), 0);   // more than half
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 150), 0);  // not this map's
+  options.final_bundle_adjustment_tail_share = 0.1;
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 130), 0);
+  options.final_bundle_adjustment_tail_share = 0.5;
+  options.final_bundle_adjustment_tail = false;
+  EXPECT_EQ(FinalAdjustmentFirstFreeKeyframe(options, 140, 130), 0);
+  options = SfmRunnerOptions();
+  options.final_bundle_adjustment_tail_share = 1.5;
+  EXPECT_NE(options.Check().find("final_bundle_adjustment_tail_share"), std::string::npos)
+      << options.Check();
+}
+
 TEST(SfmRunner, BlackFramesNeverInitialiseAndEveryFrameHasItsRow) {
   const Rig rig = DefaultRig();
   std::vector<size_t> done;

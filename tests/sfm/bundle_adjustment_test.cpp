@@ -8,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include "sfm/internal/angular_residual.h"
 #include "sfm/synthetic.h"
 #include "tests/calib/options_error_check.h"
 
@@ -262,6 +263,72 @@ TEST(BundleAdjustment, TheSolutionDoesNotDependOnWhereTheAllocatorPutsTheParamet
           << "keyframe " << k;
     }
     EXPECT_EQ(solved[0].points_in_world, solved[1].points_in_world);
+  }
+}
+
+// The closed-form Jacobians of the angular residual against central differences of the residual
+// itself, at random poses (quaternions near unit and not), points, bearings, camera poses in
+// the rig and offset scales; and the residual's norm is 2 tan(θ/2) of the angle θ between the
+// bearing and the direction to the point.
+TEST(AngularResidualModel, ClosedFormJacobiansMatchFiniteDifferences) {
+  std::mt19937 random(7);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  const auto random_vector = [&] {
+    return Eigen::Vector3d(normal(random), normal(random), normal(random));
+  };
+  for (int trial = 0; trial < 200; ++trial) {
+    const Eigen::Quaterniond frame_rotation = Eigen::Quaterniond::UnitRandom();
+    const Eigen::Vector3d frame_translation = 0.5 * random_vector();
+    double q[4];
+    Eigen::Map<Eigen::Vector4d> q_map(q);
+    q_map = Eigen::Quaterniond::UnitRandom().coeffs();
+    if (trial % 2 == 1) q_map *= 1.0 + 0.2 * normal(random);  // not unit: the formula's derivative
+    double t[3], x[3];
+    Eigen::Map<Eigen::Vector3d> t_map(t);
+    t_map = 3.0 * random_vector();
+    Eigen::Map<Eigen::Vector3d> x_map(x);
+    x_map = t_map + 10.0 * random_vector();
+    const double scale = 0.5 + std::abs(normal(random));
+    // The bearing: the true direction turned by up to about 20 degrees.
+    const Eigen::Quaterniond unit_q = Eigen::Quaterniond(q_map).normalized();
+    const Eigen::Vector3d x_frame =
+        frame_rotation * (unit_q.conjugate() * (x_map - t_map)) + scale * frame_translation;
+    const Eigen::Vector3d bearing = (x_frame.normalized() + 0.2 * random_vector()).normalized();
+    const internal::AngularResidualModel model(frame_rotation.toRotationMatrix(), frame_translation,
+                                               bearing);
+    double r[2], jq[8], jt[6], jx[6], js[2];
+    model.Evaluate(q, t, x, scale, r, jq, jt, jx, js);
+    if (trial % 2 == 0) {
+      const double angle = std::atan2(x_frame.cross(bearing).norm(), x_frame.dot(bearing));
+      EXPECT_NEAR(Eigen::Vector2d(r[0], r[1]).norm(), 2.0 * std::tan(0.5 * angle), 1e-9);
+    }
+    // Central differences, step h in each coordinate of each block.
+    const double h = 1e-6;
+    const auto check = [&](double* block, int size, const double* jacobian, const char* name) {
+      for (int k = 0; k < size; ++k) {
+        const double saved = block[k];
+        double plus[2], minus[2];
+        block[k] = saved + h;
+        model.Evaluate(q, t, x, scale, plus, nullptr, nullptr, nullptr, nullptr);
+        block[k] = saved - h;
+        model.Evaluate(q, t, x, scale, minus, nullptr, nullptr, nullptr, nullptr);
+        block[k] = saved;
+        for (int i = 0; i < 2; ++i) {
+          const double numeric = (plus[i] - minus[i]) / (2.0 * h);
+          EXPECT_NEAR(jacobian[i * size + k], numeric, 1e-6 * (1.0 + std::abs(numeric)))
+              << name << " row " << i << " column " << k << " trial " << trial;
+        }
+      }
+    };
+    check(q, 4, jq, "q");
+    check(t, 3, jt, "t");
+    check(x, 3, jx, "point");
+    double s[1] = {scale};
+    double plus[2], minus[2];
+    model.Evaluate(q, t, x, s[0] + h, plus, nullptr, nullptr, nullptr, nullptr);
+    model.Evaluate(q, t, x, s[0] - h, minus, nullptr, nullptr, nullptr, nullptr);
+    for (int i = 0; i < 2; ++i)
+      EXPECT_NEAR(js[i], (plus[i] - minus[i]) / (2.0 * h), 1e-6) << "scale row " << i;
   }
 }
 

@@ -53,8 +53,12 @@ ObservationFrame MakeObservationFrame(const Rig& rig, BundleAdjustmentOptions::M
 // Jacobians in closed form: the automatic ones cost several times more.
 class AngularResidual : public ceres::SizedCostFunction<2, 4, 3, 3> {
  public:
-  explicit AngularResidual(const ObservationFrame& frame)
-      : model_(frame.frame_from_rig_rotation, frame.frame_from_rig_translation, frame.bearing) {}
+  // Default-constructed in one array per solve (no allocation per observation), then Set.
+  AngularResidual() = default;
+  void Set(const ObservationFrame& frame) {
+    model_ = internal::AngularResidualModel(frame.frame_from_rig_rotation,
+                                            frame.frame_from_rig_translation, frame.bearing);
+  }
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
     model_.Evaluate(parameters[0], parameters[1], parameters[2], 1.0, residuals,
@@ -70,8 +74,12 @@ class AngularResidual : public ceres::SizedCostFunction<2, 4, 3, 3> {
 
 class ScaledOffsetAngularResidual : public ceres::SizedCostFunction<2, 4, 3, 3, 1> {
  public:
-  explicit ScaledOffsetAngularResidual(const ObservationFrame& frame)
-      : model_(frame.frame_from_rig_rotation, frame.frame_from_rig_translation, frame.bearing) {}
+  // Default-constructed in one array per solve (no allocation per observation), then Set.
+  ScaledOffsetAngularResidual() = default;
+  void Set(const ObservationFrame& frame) {
+    model_ = internal::AngularResidualModel(frame.frame_from_rig_rotation,
+                                            frame.frame_from_rig_translation, frame.bearing);
+  }
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
     model_.Evaluate(parameters[0], parameters[1], parameters[2], parameters[3][0], residuals,
@@ -156,28 +164,36 @@ bool Solve(const Rig& rig, const BundleAdjustmentOptions& options, BundleAdjustm
 
   // One robust loss for every residual (declared before the problem, which uses it to the end).
   const std::unique_ptr<ceres::LossFunction> loss(MakeLoss(options));
+  // The residuals' costs, in one array each, also outlive the problem.
+  const bool scaled = EstimatesOffsetScale(options);
+  std::vector<AngularResidual> costs(scaled ? 0 : problem->observations.size());
+  std::vector<ScaledOffsetAngularResidual> scaled_costs(scaled ? problem->observations.size() : 0);
   ceres::Problem::Options problem_options;
   problem_options.manifold_ownership = ceres::TAKE_OWNERSHIP;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem ceres_problem(problem_options);
   const Eigen::Vector3d center = CentralCenter(rig);
   std::vector<char> keyframe_used(problem->keyframes.size(), 0);
   std::vector<char> point_used(problem->points_in_world.size(), 0);
-  const bool scaled = EstimatesOffsetScale(options);
   double* offset_scale = &camera_parameters[kPoseParameters * num_keyframes];
   *offset_scale = summary->offset_scale;
-  for (const BundleAdjustmentObservation& observation : problem->observations) {
+  for (size_t i = 0; i < problem->observations.size(); ++i) {
+    const BundleAdjustmentObservation& observation = problem->observations[i];
     const ObservationFrame frame =
         MakeObservationFrame(rig, options.mode, center, observation.camera, observation.bearing);
-    if (scaled)
+    if (scaled) {
+      scaled_costs[i].Set(frame);
       ceres_problem.AddResidualBlock(
-          new ScaledOffsetAngularResidual(frame), loss.get(), rotation_of(observation.keyframe),
+          &scaled_costs[i], loss.get(), rotation_of(observation.keyframe),
           translation_of(observation.keyframe), problem->points_in_world[observation.point].data(),
           offset_scale);
-    else
-      ceres_problem.AddResidualBlock(
-          new AngularResidual(frame), loss.get(), rotation_of(observation.keyframe),
-          translation_of(observation.keyframe), problem->points_in_world[observation.point].data());
+    } else {
+      costs[i].Set(frame);
+      ceres_problem.AddResidualBlock(&costs[i], loss.get(), rotation_of(observation.keyframe),
+                                     translation_of(observation.keyframe),
+                                     problem->points_in_world[observation.point].data());
+    }
     keyframe_used[observation.keyframe] = 1;
     point_used[observation.point] = 1;
   }

@@ -22,6 +22,7 @@ namespace omni::internal {
 // is smooth everywhere except at p = −b.
 class AngularResidualModel {
  public:
+  AngularResidualModel() = default;  // a placeholder, to be assigned
   AngularResidualModel(const Eigen::Matrix3d& frame_from_rig_rotation,
                        const Eigen::Vector3d& frame_from_rig_translation,
                        const Eigen::Vector3d& bearing);
@@ -34,9 +35,10 @@ class AngularResidualModel {
                 double* jacobian_point, double* jacobian_scale) const;
 
  private:
-  Eigen::Matrix3d frame_from_rig_rotation_;
-  Eigen::Vector3d frame_from_rig_translation_;
-  Eigen::Vector3d bearing_, tangent_u_, tangent_v_;
+  Eigen::Matrix3d frame_from_rig_rotation_ = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d frame_from_rig_translation_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d bearing_ = Eigen::Vector3d::UnitZ(), tangent_u_ = Eigen::Vector3d::UnitX(),
+                  tangent_v_ = Eigen::Vector3d::UnitY();
 };
 
 }  // namespace omni::internal

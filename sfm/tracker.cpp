@@ -21,6 +21,55 @@
 
 namespace omni {
 
+namespace {
+
+// The map point of each track (an index into the tracker's points), by track id: the front end
+// numbers tracks from 0 on, one after the other, so a dense array (−1: no point) replaces a hash
+// map on the tracker's busiest lookups.
+class TrackToPoint {
+ public:
+  // The point of `track`, −1 for none.
+  int Find(int track) const {
+    return track >= 0 && static_cast<size_t>(track) < point_.size() ? point_[track] : -1;
+  }
+  bool Contains(int track) const { return Find(track) >= 0; }
+  // The point of a track that has one (throws std::out_of_range otherwise).
+  int At(int track) const {
+    const int point = Find(track);
+    if (point < 0) throw std::out_of_range("TrackToPoint: track without a point");
+    return point;
+  }
+  void Set(int track, int point) {
+    assert(track >= 0 && point >= 0);
+    if (static_cast<size_t>(track) >= point_.size())
+      point_.resize(std::max<size_t>(track + 1, 2 * point_.size()), -1);
+    if (point_[track] < 0) ++size_;
+    point_[track] = point;
+  }
+  void Erase(int track) {
+    if (Find(track) < 0) return;
+    point_[track] = -1;
+    --size_;
+  }
+  void Clear() {
+    point_.clear();
+    size_ = 0;
+  }
+  size_t size() const { return size_; }
+  // f(track, point&) for every track with a point, by track id.
+  template <typename F>
+  void ForEach(F&& f) {
+    for (size_t track = 0; track < point_.size(); ++track)
+      if (point_[track] >= 0) f(static_cast<int>(track), point_[track]);
+  }
+
+ private:
+  std::vector<int> point_;
+  size_t size_ = 0;
+};
+
+}  // namespace
+
 std::string TrackerOptions::Check() const {
   for (const auto& [name, check] :
        {std::pair<const char*, std::string>{"relative_ransac", relative_ransac.Check()},
@@ -120,7 +169,7 @@ struct Tracker::Impl {
   // started).
   int keyframes_at_global_adjustment = 0;
   std::vector<Point> points;
-  std::unordered_map<int, int> track_to_point;
+  TrackToPoint track_to_point;
   std::vector<int> pending;  // live points not handed over yet (indices into points)
   // The last search that listed a point as a candidate (a point is listed once per search even
   // when several keyframes observe it; a frame may search more than once).
@@ -256,7 +305,7 @@ struct Tracker::Impl {
     points.push_back(std::move(point));
     point_stamp.push_back(-1);
     const int index = static_cast<int>(points.size()) - 1;
-    track_to_point[track] = index;
+    track_to_point.Set(track, index);
     pending.push_back(index);
     return index;
   }
@@ -284,7 +333,7 @@ struct Tracker::Impl {
   void ClearPoints() {
     points.clear();
     point_stamp.clear();
-    track_to_point.clear();
+    track_to_point.Clear();
     pending.clear();
     frame_stamps.clear();
     recent_frames.clear();
@@ -509,8 +558,8 @@ std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
   std::vector<char> eligible(observations.size(), 0);
   for (size_t i = 0; i < observations.size(); ++i) {
     observed.insert(key(observations[i].track, observations[i].camera));
-    const auto it = track_to_point.find(observations[i].track);
-    eligible[i] = it == track_to_point.end() || !points[it->second].alive;
+    const auto it = track_to_point.Find(observations[i].track);
+    eligible[i] = it < 0 || !points[it].alive;
   }
   const Rigid3d rig_from_world = world_from_rig.Inverse();
   const int num_keyframes = static_cast<int>(keyframes.size());
@@ -518,11 +567,11 @@ std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
   std::vector<MapPointProjection> candidates;
   for (int k = std::max(0, num_keyframes - options.map_search_keyframes); k < num_keyframes; ++k)
     for (const TrackObservation& observation : keyframes[k].observations) {
-      const auto it = track_to_point.find(observation.track);
-      if (it == track_to_point.end()) continue;
-      const Point& point = points[it->second];
-      if (!point.alive || point_stamp[it->second] == stamp) continue;
-      point_stamp[it->second] = stamp;
+      const auto it = track_to_point.Find(observation.track);
+      if (it < 0) continue;
+      const Point& point = points[it];
+      if (!point.alive || point_stamp[it] == stamp) continue;
+      point_stamp[it] = stamp;
       const Eigen::Vector3d in_rig = rig_from_world * point.position;
       for (int c = 0; c < num_cameras; ++c) {
         if (observed.count(key(point.track, c))) continue;
@@ -563,11 +612,11 @@ Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservatio
   const auto start = std::chrono::steady_clock::now();
   Resection r;
   for (size_t j = 0; j < observations.size(); ++j) {
-    const auto it = track_to_point.find(observations[j].track);
-    if (it == track_to_point.end() || !points[it->second].alive) continue;
+    const auto it = track_to_point.Find(observations[j].track);
+    if (it < 0 || !points[it].alive) continue;
     r.bearings.push_back(options.central ? RigBearing(observations[j]) : observations[j].bearing);
     r.cameras.push_back(observations[j].camera);
-    r.positions.push_back(points[it->second].position);
+    r.positions.push_back(points[it].position);
     r.observation_index.push_back(static_cast<int>(j));
   }
   PosePrior prior;
@@ -632,8 +681,8 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
       Predict(num_frames - 1, &motion_prior)) {
     int with_points = 0;
     for (const TrackObservation& o : observations) {
-      const auto it = track_to_point.find(o.track);
-      with_points += it != track_to_point.end() && points[it->second].alive;
+      const auto it = track_to_point.Find(o.track);
+      with_points += it >= 0 && points[it].alive;
     }
     resection = Resect(observations, &motion_prior,
                        static_cast<int>(std::ceil(options.resection_prior_share * with_points)));
@@ -738,7 +787,7 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   std::vector<char> tracked_now(points.size(), 0);
   for (size_t k = 0; k < bearings.size(); ++k) {
     if (!ransac.inlier_mask[k]) continue;
-    tracked_now[track_to_point[observations[observation_index[k]].track]] = 1;
+    tracked_now[track_to_point.At(observations[observation_index[k]].track)] = 1;
     depths.push_back((positions[k] - world_from_rig.translation).norm());
   }
   // The re-observations that agree with the pose (the resection's inliers already include
@@ -749,19 +798,19 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   for (int j : observation_index) in_resection[j] = 1;
   for (size_t j = 0; j < observations.size(); ++j) {
     if (in_resection[j]) continue;
-    const auto it = track_to_point.find(observations[j].track);
-    if (it == track_to_point.end() || !points[it->second].alive) continue;
-    if (ObservationAngleError(world_from_rig, observations[j], points[it->second].position) >
+    const auto it = track_to_point.Find(observations[j].track);
+    if (it < 0 || !points[it].alive) continue;
+    if (ObservationAngleError(world_from_rig, observations[j], points[it].position) >
         options.reobservation_max_angle_error)
       continue;
     reobserved.push_back(static_cast<int>(j));
-    if (options.reobserved_count_as_tracked) tracked_now[it->second] = 1;
+    if (options.reobserved_count_as_tracked) tracked_now[it] = 1;
   }
   for (const TrackObservation& observation : keyframes[last].observations) {
-    const auto it = track_to_point.find(observation.track);
-    if (it == track_to_point.end() || !points[it->second].alive) continue;
+    const auto it = track_to_point.Find(observation.track);
+    if (it < 0 || !points[it].alive) continue;
     ++candidate.last_keyframe_points;
-    candidate.tracked_points += tracked_now[it->second];
+    candidate.tracked_points += tracked_now[it];
   }
   if (!depths.empty()) {
     std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
@@ -806,12 +855,12 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   for (size_t k = 0; k < bearings.size(); ++k) {
     if (!ransac.inlier_mask[k]) continue;
     const TrackObservation& observation = observations[observation_index[k]];
-    points[track_to_point[observation.track]].observations.push_back(
+    points[track_to_point.At(observation.track)].observations.push_back(
         {index, observation.camera, observation.bearing});
   }
   for (int j : reobserved) {
     const TrackObservation& observation = observations[j];
-    points[track_to_point[observation.track]].observations.push_back(
+    points[track_to_point.At(observation.track)].observations.push_back(
         {index, observation.camera, observation.bearing});
   }
   TriangulateNewPoints(index);
@@ -827,9 +876,9 @@ Tracker::Impl::Resection Tracker::Impl::EvaluatePose(
   r.world_from_rig = world_from_rig;
   const double max_cos = std::cos(ResectionRansac().max_angle_error);
   for (size_t j = 0; j < observations.size(); ++j) {
-    const auto it = track_to_point.find(observations[j].track);
-    if (it == track_to_point.end() || !points[it->second].alive) continue;
-    const Eigen::Vector3d& position = points[it->second].position;
+    const auto it = track_to_point.Find(observations[j].track);
+    if (it < 0 || !points[it].alive) continue;
+    const Eigen::Vector3d& position = points[it].position;
     r.bearings.push_back(options.central ? RigBearing(observations[j]) : observations[j].bearing);
     r.cameras.push_back(observations[j].camera);
     r.positions.push_back(position);
@@ -903,9 +952,9 @@ bool Tracker::Impl::PoseFromRelativeMotion(const std::vector<TrackObservation>& 
   std::vector<double> scales;
   for (size_t k = 0; k < pairs.size(); ++k) {
     if (!ransac.inlier_mask[k]) continue;
-    const auto it = track_to_point.find((*best->observations)[pairs[k].first].track);
-    if (it == track_to_point.end() || !points[it->second].alive) continue;
-    const Eigen::Vector3d x = central_reference_from_world * points[it->second].position;
+    const auto it = track_to_point.Find((*best->observations)[pairs[k].first].track);
+    if (it < 0 || !points[it].alive) continue;
+    const Eigen::Vector3d x = central_reference_from_world * points[it].position;
     const Eigen::Vector3d d = reference_from_frame.rotation * bearings_frame[k];
     const Eigen::Vector3d td = t.cross(d);
     if (td.squaredNorm() < 1e-12) continue;
@@ -948,7 +997,7 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
   // be seen by two cameras of one keyframe).
   std::unordered_map<int, std::vector<PointObservation>> by_track;
   for (const TrackObservation& observation : keyframes[keyframe].observations)
-    if (!track_to_point.count(observation.track))
+    if (!track_to_point.Contains(observation.track))
       by_track[observation.track].push_back({keyframe, observation.camera, observation.bearing});
   for (int k = keyframe - 1; k >= window_begin; --k)
     for (const TrackObservation& older : keyframes[k].observations) {
@@ -958,7 +1007,7 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
   std::unordered_map<int, int> new_tracks;
   for (const TrackObservation& observation : keyframes[keyframe].observations) {
     const auto it = by_track.find(observation.track);
-    if (it == by_track.end() || track_to_point.count(observation.track)) continue;
+    if (it == by_track.end() || track_to_point.Contains(observation.track)) continue;
     std::vector<PointObservation> track_observations = std::move(it->second);
     by_track.erase(it);
     const bool two_keyframes =
@@ -1038,7 +1087,7 @@ void Tracker::Impl::LocalBundleAdjustment() {
     for (int i : removed[p]) points[p].observations.erase(points[p].observations.begin() + i);
     if (points[p].observations.size() < 2) {
       points[p].alive = false;
-      track_to_point.erase(points[p].track);
+      track_to_point.Erase(points[p].track);
     }
   }
   FinalizeUpTo(num_keyframes - options.num_free_keyframes);
@@ -1123,12 +1172,12 @@ void Tracker::Impl::RecordFrameRays(const Rigid3d& world_from_rig,
                           keyframes[keyframe].world_from_rig.Inverse() * world_from_rig,
                           KeyframeStep(keyframe)});
   for (int j : of_map_points)
-    AddFrameObservation(&points[track_to_point.at(observations[j].track)], stamp,
+    AddFrameObservation(&points[track_to_point.At(observations[j].track)], stamp,
                         observations[j].camera);
   RecentFrame recent;
   recent.stamp = stamp;
   for (const TrackObservation& observation : observations)
-    if (!track_to_point.count(observation.track)) recent.observations.push_back(observation);
+    if (!track_to_point.Contains(observation.track)) recent.observations.push_back(observation);
   recent_frames.push_back(std::move(recent));
 }
 
@@ -1277,7 +1326,7 @@ FrameResult Tracker::Impl::InitialiseOverStereoMap(
     const std::vector<TrackObservation>& observations) {
   // The stereo map, kept to be restored, and its positions by track (the scale's reference).
   std::vector<Point> stereo_points = points;
-  std::unordered_map<int, int> stereo_track_to_point = track_to_point;
+  TrackToPoint stereo_track_to_point = track_to_point;
   std::vector<int> stereo_pending = pending;
   std::vector<int> stereo_stamp = point_stamp;
   std::vector<FrameStamp> stereo_frame_stamps = frame_stamps;
@@ -1303,13 +1352,13 @@ FrameResult Tracker::Impl::InitialiseOverStereoMap(
   const Keyframe& keyframe0 = keyframes[0];
   std::vector<double> ratios;
   for (const Point& point : points) {
-    const auto it = stereo_track_to_point.find(point.track);
-    if (it == stereo_track_to_point.end() || point.observations.empty()) continue;
+    const auto it = stereo_track_to_point.Find(point.track);
+    if (it < 0 || point.observations.empty()) continue;
     const PointObservation& first = point.observations.front();
     const Eigen::Vector3d center =
         Ray(keyframe0.world_from_rig, first.camera, first.bearing).center;
     const double temporal = (point.position - center).norm();
-    const double stereo = (stereo_points[it->second].position - center).norm();
+    const double stereo = (stereo_points[it].position - center).norm();
     if (temporal > 0.0 && std::isfinite(stereo)) ratios.push_back(stereo / temporal);
   }
   double scale = 0.0;
@@ -1426,9 +1475,9 @@ bool Tracker::PredictPose(Rigid3d* world_from_rig) const {
 }
 
 bool Tracker::TrackPosition(int track, Eigen::Vector3d* position) const {
-  const auto it = impl_->track_to_point.find(track);
-  if (it == impl_->track_to_point.end() || !impl_->points[it->second].alive) return false;
-  *position = impl_->points[it->second].position;
+  const auto it = impl_->track_to_point.Find(track);
+  if (it < 0 || !impl_->points[it].alive) return false;
+  *position = impl_->points[it].position;
   return true;
 }
 
@@ -1446,11 +1495,11 @@ FramePoseRefinement Tracker::RefineFramePose(int frame, const Rigid3d& world_fro
   problem.keyframes.push_back({world_from_rig, false});
   std::unordered_map<int, int> problem_point;  // map point → index in the problem
   for (const Impl::KeptObservation& o : kept->second) {
-    const auto it = m.track_to_point.find(o.track);
-    if (it == m.track_to_point.end() || !m.points[it->second].alive) continue;
+    const auto it = m.track_to_point.Find(o.track);
+    if (it < 0 || !m.points[it].alive) continue;
     const auto [point, added] =
-        problem_point.emplace(it->second, static_cast<int>(problem.points_in_world.size()));
-    if (added) problem.points_in_world.push_back(m.points[it->second].position);
+        problem_point.emplace(it, static_cast<int>(problem.points_in_world.size()));
+    if (added) problem.points_in_world.push_back(m.points[it].position);
     problem.observations.push_back({0, o.camera, point->second, o.bearing.cast<double>()});
   }
   refinement.observations = static_cast<int>(problem.observations.size());
@@ -1526,9 +1575,9 @@ std::vector<int> Tracker::KeyframeFrames() const {
 std::vector<std::pair<int, Eigen::Vector3d>> Tracker::KeyframeTrackPoints(int keyframe) const {
   std::vector<std::pair<int, Eigen::Vector3d>> result;
   for (const TrackObservation& observation : impl_->keyframes.at(keyframe).observations) {
-    const auto it = impl_->track_to_point.find(observation.track);
-    if (it == impl_->track_to_point.end() || !impl_->points[it->second].alive) continue;
-    result.emplace_back(observation.track, impl_->points[it->second].position);
+    const auto it = impl_->track_to_point.Find(observation.track);
+    if (it < 0 || !impl_->points[it].alive) continue;
+    result.emplace_back(observation.track, impl_->points[it].position);
   }
   return result;
 }
@@ -1550,11 +1599,10 @@ void Tracker::ApplyCorrection(const std::vector<Sim3d>& new_from_old) {
 void Tracker::MergeTracks(const std::vector<std::pair<int, int>>& drop_keep) {
   Impl& m = *impl_;
   for (const auto& [drop, keep] : drop_keep) {
-    const auto d = m.track_to_point.find(drop), k = m.track_to_point.find(keep);
-    if (d == m.track_to_point.end() || k == m.track_to_point.end() || d->second == k->second)
-      continue;
-    Impl::Point& from = m.points[d->second];
-    Impl::Point& to = m.points[k->second];
+    const auto d = m.track_to_point.Find(drop), k = m.track_to_point.Find(keep);
+    if (d < 0 || k < 0 || d == k) continue;
+    Impl::Point& from = m.points[d];
+    Impl::Point& to = m.points[k];
     if (!from.alive || !to.alive) continue;
     for (const Impl::PointObservation& o : from.observations) {
       const bool seen = std::any_of(to.observations.begin(), to.observations.end(),
@@ -1566,7 +1614,7 @@ void Tracker::MergeTracks(const std::vector<std::pair<int, int>>& drop_keep) {
     to.frame_observations.insert(to.frame_observations.end(), from.frame_observations.begin(),
                                  from.frame_observations.end());
     from.alive = false;
-    d->second = k->second;
+    m.track_to_point.Set(drop, k);
   }
 }
 
@@ -1582,7 +1630,7 @@ constexpr double kSearchRadiusInMergeAngles = 20.0;
 template <typename PointT>
 int MergeNearbyPoints(const Rig& rig, BundleAdjustmentOptions::Mode mode,
                       const std::vector<Rigid3d>& world_from_rig, double merge_angle,
-                      std::vector<PointT>* points, std::unordered_map<int, int>* track_to_point) {
+                      std::vector<PointT>* points, TrackToPoint* track_to_point) {
   std::vector<int> live;
   std::vector<double> radius(points->size(), 0.0);
   for (size_t p = 0; p < points->size(); ++p) {
@@ -1650,11 +1698,11 @@ int MergeNearbyPoints(const Rig& rig, BundleAdjustmentOptions::Mode mode,
         }
   }
   if (merged == 0) return 0;
-  for (auto& [track, point] : *track_to_point) {
+  track_to_point->ForEach([&](int, int& point) {
     int target = point;
     while (target >= 0 && merged_into[target] >= 0) target = merged_into[target];
     point = target;
-  }
+  });
   return merged;
 }
 

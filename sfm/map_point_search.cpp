@@ -66,30 +66,11 @@ bool NormalisedWindowAt(const cv::Mat& image, int x, int y, int h, std::vector<f
   return true;
 }
 
-// The same window at a subpixel centre (bilinear, as sfm/zncc_matching's Zncc); empty when it
-// leaves the image or is flat.
+// The same window at a subpixel centre (NormalisedWindow); empty when it leaves the image or is
+// flat.
 std::vector<float> SubpixelWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int h) {
-  const double margin = h + 1.0;
-  if (!(pixel.x() >= margin && pixel.y() >= margin && pixel.x() <= image.cols - 1 - margin &&
-        pixel.y() <= image.rows - 1 - margin))
-    return {};
-  const int size = 2 * h + 1;
-  cv::Mat window;
-  cv::getRectSubPix(image, cv::Size(size, size),
-                    cv::Point2f(static_cast<float>(pixel.x()), static_cast<float>(pixel.y())),
-                    window, CV_32F);
-  std::vector<float> values(window.begin<float>(), window.end<float>());
-  double mean = 0.0;
-  for (float v : values) mean += v;
-  mean /= values.size();
-  double norm = 0.0;
-  for (float& v : values) {
-    v -= static_cast<float>(mean);
-    norm += static_cast<double>(v) * v;
-  }
-  norm = std::sqrt(norm);
-  if (norm < 0.25 * std::sqrt(static_cast<double>(values.size()))) return {};
-  for (float& v : values) v = static_cast<float>(v / norm);
+  std::vector<float> values(static_cast<size_t>(2 * h + 1) * (2 * h + 1));
+  if (!NormalisedWindow(image, pixel, h, values.data())) return {};
   return values;
 }
 

@@ -65,6 +65,14 @@ struct BestTwoZncc {
 // true when there is no second (second at or below BestTwoZncc::kNone).
 bool IsDistinctZncc(double best, double second, double max_distance_ratio);
 
+// The window of (2 half_window + 1)² pixels of a grey 8-bit image centred at a subpixel
+// position, bilinearly sampled (as cv::getRectSubPix), zero-mean and unit-norm, into `values`
+// (that many floats): the ZNCC of two windows is then their dot product. False when the window
+// or its interpolation neighbours leave the image, or it is flat (below a quarter of a grey level
+// of standard deviation).
+bool NormalisedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int half_window,
+                      float* values);
+
 // ZNCC of the windows centred at two subpixel positions (bilinear sampling); NaN when a window
 // leaves its image or is flat.
 double Zncc(const cv::Mat& image1, const Eigen::Vector2d& pixel1, const cv::Mat& image2,

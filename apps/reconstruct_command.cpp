@@ -17,6 +17,7 @@
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -144,11 +145,18 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
           p.keyframes_sculpted, p.triangles);
     };
   }
+  // Snapshots: the closed δO (surface_<keyframe>.ply) and its observed part
+  // (observed_<keyframe>.ply), written as they come and coloured at the end, when the points
+  // have their colours (a later snapshot of the same keyframe, after a loop closure's replay,
+  // replaces the earlier one).
+  std::map<uint32_t, std::vector<PointId>> snapshot_observed_points;
   if (o.pipeline.snapshot_every > 0) {
     fs::create_directories(partial / "snapshots");
-    callbacks.snapshot = [&partial](const KeyframeId& keyframe, const TriangleMesh& mesh) {
-      WritePlyMesh(mesh,
-                   partial / "snapshots" / ("surface_" + std::to_string(keyframe.value) + ".ply"));
+    callbacks.snapshot = [&partial, &snapshot_observed_points](const PipelineSnapshot& snapshot) {
+      const std::string keyframe = std::to_string(snapshot.last_keyframe.value);
+      WritePlyMesh(snapshot.closed, partial / "snapshots" / ("surface_" + keyframe + ".ply"));
+      WritePlyMesh(snapshot.observed, partial / "snapshots" / ("observed_" + keyframe + ".ply"));
+      snapshot_observed_points[snapshot.last_keyframe.value] = snapshot.observed_points;
     };
   }
   const PipelineResult result = RunPipeline(drive, o.pipeline, callbacks);
@@ -180,6 +188,12 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
   if (!closed.triangles.empty()) {
     WritePlyMesh(surface, partial / "surface.ply");
     WritePlyMesh(closed, partial / "surface_closed.ply");
+  }
+  for (const auto& [keyframe, observed_points] : snapshot_observed_points) {
+    const fs::path file = partial / "snapshots" / ("observed_" + std::to_string(keyframe) + ".ply");
+    TriangleMesh observed = ReadPlyMesh(file);
+    ColorMeshVertices(observed_points, point_colors, &observed);
+    WritePlyMesh(observed, file);
   }
   std::ostringstream keyframes_csv;
   keyframes_csv << PipelineKeyframesCsvHeader() << '\n';
@@ -326,8 +340,10 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
       ->required();
   command->add_flag("--force", o->force, "Replace OUT if it holds a previous reconstruction");
   command
-      ->add_option("--snapshot-every", o->pipeline.snapshot_every,
-                   "Write OUT/snapshots/surface_<keyframe>.ply every K keyframes (0: none)")
+      ->add_option(
+          "--snapshot-every", o->pipeline.snapshot_every,
+          "Write OUT/snapshots/surface_<keyframe>.ply (closed) and observed_<keyframe>.ply every "
+          "K keyframes (0: none)")
       ->capture_default_str();
   command
       ->add_option("--queue", o->pipeline.queue_capacity,

@@ -49,7 +49,9 @@ struct SurfaceCommandOptions {
   bool no_batch = false;
   bool no_genus_refinement = false;  // step 6 (paper §4.6) parts switched off
   bool no_smoothing = false;
-  int snapshot_every = 0;  // write OUT/snapshots/surface_<keyframe>.ply every K keyframes; 0: none
+  // Write OUT/snapshots/surface_<keyframe>.ply and observed_<keyframe>.ply every K keyframes;
+  // 0: none.
+  int snapshot_every = 0;
   GtKeyframeOptions gt;
   SculptorOptions sculptor;
 };
@@ -268,9 +270,11 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     const size_t k = static_cast<size_t>(o.snapshot_every);
     if (k == 0 || new_stats.empty() || processed / k == before / k) return;
     std::filesystem::create_directories(out / "snapshots");
-    WritePlyMesh(sculptor.ExtractMesh(),
-                 out / "snapshots" /
-                     ("surface_" + std::to_string(new_stats.back().keyframe.value) + ".ply"));
+    // The closed δO and its observed part, coloured as surface.ply.
+    const ColoredSurfaces surfaces = ExtractColoredSurfaces(sculptor, point_colors);
+    const std::string keyframe = std::to_string(new_stats.back().keyframe.value);
+    WritePlyMesh(surfaces.closed, out / "snapshots" / ("surface_" + keyframe + ".ply"));
+    WritePlyMesh(surfaces.observed, out / "snapshots" / ("observed_" + keyframe + ".ply"));
   };
   for (size_t i = 0; i < stream.size(); ++i) {
     snapshot(sculptor.AddKeyframe(stream[i]));
@@ -600,8 +604,10 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
                    "Gaussian noise on the keyframe orientations written to poses.tum, degrees")
       ->capture_default_str();
   command
-      ->add_option("--snapshot-every", o->snapshot_every,
-                   "Write OUT/snapshots/surface_<keyframe>.ply every K keyframes (0: none)")
+      ->add_option(
+          "--snapshot-every", o->snapshot_every,
+          "Write OUT/snapshots/surface_<keyframe>.ply (closed) and observed_<keyframe>.ply "
+          "every K keyframes (0: none)")
       ->capture_default_str();
   command->add_option("--seed", o->gt.seed, "Seed of the point sampling")->capture_default_str();
   command

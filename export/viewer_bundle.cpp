@@ -217,6 +217,38 @@ class PointGrid {
   std::unordered_map<uint64_t, std::vector<size_t>> cells_;
 };
 
+// A snapshot mesh with each vertex coloured as the nearest SfM point within the grid's radius
+// (grey without one: a Steiner vertex, or a point that moved since), its own colours kept when
+// it has them. With without_unmatched, the triangles with a vertex without a point are left out
+// (the closed δO of an old reconstruction folder, without its observed part, then looks like
+// the observed surface it grows into), and the vertices they alone used.
+TriangleMesh ColoredByNearestPoint(const TriangleMesh& snapshot, const PointGrid& grid,
+                                   const std::vector<Rgb8>& point_colors, bool without_unmatched) {
+  std::vector<long> nearest(snapshot.vertices.size(), -1);
+  for (size_t i = 0; i < snapshot.vertices.size(); ++i)
+    nearest[i] = grid.Nearest(snapshot.vertices[i]);
+  TriangleMesh mesh;
+  std::vector<int> new_index(snapshot.vertices.size(), -1);
+  for (const Eigen::Vector3i& t : snapshot.triangles) {
+    if (without_unmatched && (nearest[t[0]] < 0 || nearest[t[1]] < 0 || nearest[t[2]] < 0))
+      continue;
+    Eigen::Vector3i kept;
+    for (int k = 0; k < 3; ++k) {
+      if (new_index[t[k]] < 0) {
+        new_index[t[k]] = static_cast<int>(mesh.vertices.size());
+        mesh.vertices.push_back(snapshot.vertices[t[k]]);
+        mesh.colors.push_back(!snapshot.colors.empty() ? snapshot.colors[t[k]]
+                              : nearest[t[k]] >= 0 && !point_colors.empty()
+                                  ? point_colors[nearest[t[k]]]
+                                  : Rgb8(128, 128, 128));
+      }
+      kept[k] = new_index[t[k]];
+    }
+    mesh.triangles.push_back(kept);
+  }
+  return mesh;
+}
+
 bool IsOurViewer(const fs::path& folder) { return fs::exists(folder / "data" / kSceneFile); }
 
 }  // namespace
@@ -292,18 +324,25 @@ ViewerSummary WriteViewer(const fs::path& reconstruction, const ViewerOptions& o
   for (size_t k = 1; k < points_until.size(); ++k) points_until[k] += points_until[k - 1];
   summary.points = points.points.size();
 
-  // Snapshots, in keyframe order.
-  std::vector<std::pair<long, fs::path>> snapshot_files;
+  // Snapshots, in keyframe order: per keyframe, its observed surface (observed_<keyframe>.ply)
+  // and the closed δO (surface_<keyframe>.ply), either of them possibly missing.
+  struct SnapshotFiles {
+    fs::path observed, closed;
+  };
+  std::map<long, SnapshotFiles> snapshot_files;
   if (fs::is_directory(reconstruction / "snapshots")) {
     for (const auto& entry : fs::directory_iterator(reconstruction / "snapshots")) {
-      const std::string name = entry.path().filename().string();
-      if (name.rfind("surface_", 0) != 0 || entry.path().extension() != ".ply") continue;
-      const std::string number = entry.path().stem().string().substr(8);
-      if (number.empty() || number.find_first_not_of("0123456789") != std::string::npos) continue;
-      snapshot_files.emplace_back(std::stol(number), entry.path());
+      if (entry.path().extension() != ".ply") continue;
+      const std::string stem = entry.path().stem().string();
+      for (const std::string prefix : {"observed_", "surface_"}) {
+        if (stem.rfind(prefix, 0) != 0) continue;
+        const std::string number = stem.substr(prefix.size());
+        if (number.empty() || number.find_first_not_of("0123456789") != std::string::npos) continue;
+        SnapshotFiles& files = snapshot_files[std::stol(number)];
+        (prefix == "observed_" ? files.observed : files.closed) = entry.path();
+      }
     }
   }
-  std::sort(snapshot_files.begin(), snapshot_files.end());
 
   fs::path partial = reconstruction / "viewer.incomplete";
   fs::remove_all(partial);
@@ -376,44 +415,27 @@ ViewerSummary WriteViewer(const fs::path& reconstruction, const ViewerOptions& o
 
   nlohmann::json snapshots = nlohmann::json::array();
   const PointGrid grid(points.points, options.snapshot_color_radius);
-  for (const auto& [keyframe, file] : snapshot_files) {
-    const TriangleMesh closed = ReadPlyMesh(file);
-    // Each vertex: the nearest SfM point within the radius, or none (a Steiner vertex, or a
-    // point that moved since).
-    std::vector<long> nearest(closed.vertices.size(), -1);
-    for (size_t i = 0; i < closed.vertices.size(); ++i)
-      nearest[i] = grid.Nearest(closed.vertices[i]);
-    TriangleMesh mesh;
-    std::vector<int> new_index(closed.vertices.size(), -1);
-    for (const Eigen::Vector3i& t : closed.triangles) {
-      if (options.snapshot_without_steiner &&
-          (nearest[t[0]] < 0 || nearest[t[1]] < 0 || nearest[t[2]] < 0))
-        continue;
-      Eigen::Vector3i kept;
-      for (int k = 0; k < 3; ++k) {
-        if (new_index[t[k]] < 0) {
-          new_index[t[k]] = static_cast<int>(mesh.vertices.size());
-          mesh.vertices.push_back(closed.vertices[t[k]]);
-          mesh.colors.push_back(!closed.colors.empty() ? closed.colors[t[k]]
-                                : nearest[t[k]] >= 0 && !points.colors.empty()
-                                    ? points.colors[nearest[t[k]]]
-                                    : Rgb8(128, 128, 128));
-        }
-        kept[k] = new_index[t[k]];
-      }
-      mesh.triangles.push_back(kept);
-    }
+  for (const auto& [keyframe, files] : snapshot_files) {
+    const bool observed = !files.observed.empty();
+    const TriangleMesh read = ReadPlyMesh(observed ? files.observed : files.closed);
+    const TriangleMesh mesh =
+        observed && !read.colors.empty()
+            ? read
+            : ColoredByNearestPoint(read, grid, points.colors,
+                                    !observed && options.snapshot_without_steiner);
     if (mesh.triangles.empty()) continue;
     const std::string key = "snapshot_" + std::to_string(keyframe);
     const std::string file_name = key + ".js";
     WriteDataScript(partial / "data" / file_name, key,
                     nlohmann::json(Base64(EncodeGlb(mesh, PointCloud()))).dump(), &summary.bytes);
-    snapshots.push_back({{"keyframe", keyframe},
-                         {"data", key},
-                         {"file", "data/" + file_name},
-                         {"vertices", mesh.vertices.size()},
-                         {"triangles", mesh.triangles.size()},
-                         {"closed_triangles", closed.triangles.size()}});
+    nlohmann::json snapshot = {{"keyframe", keyframe},
+                               {"data", key},
+                               {"file", "data/" + file_name},
+                               {"observed", observed},
+                               {"vertices", mesh.vertices.size()},
+                               {"triangles", mesh.triangles.size()}};
+    if (!observed) snapshot["closed_triangles"] = read.triangles.size();
+    snapshots.push_back(snapshot);
   }
   scene["snapshots"] = snapshots;
   summary.snapshots = snapshots.size();

@@ -9,8 +9,10 @@
 // loop closures of reconstruct.json, stats/keyframes.csv as text, the list of snapshots),
 // data/surface.js (the .glb of export/gltf.h, base64: surface.ply and the SfM points of
 // sparse/points3D.txt, or points.ply, ordered by the first keyframe that observed them) and one
-// data/snapshot_<keyframe>.js per snapshots/surface_<keyframe>.ply (a .glb of that mesh, its
-// vertices coloured by the nearest SfM point, see ViewerOptions).
+// data/snapshot_<keyframe>.js per snapshot (a .glb): snapshots/observed_<keyframe>.ply as it
+// is, the observed surface of that moment coloured as surface.ply; for a reconstruction folder
+// without it (written before those files existed), snapshots/surface_<keyframe>.ply, the closed
+// δO of that moment, filtered and coloured by the final SfM points (see ViewerOptions).
 
 #include <filesystem>
 #include <string>
@@ -21,12 +23,15 @@ struct ViewerOptions {
   // The page and the three.js scripts: index.html, viewer.js, viewer.css and lib/ (the build
   // puts them beside the executable, in viewer_assets/).
   std::filesystem::path assets;
-  // A snapshot vertex takes the colour of the nearest SfM point within this distance (map
-  // units), grey otherwise.
+  // A snapshot vertex without a colour (the closed δO of a folder without observed snapshots)
+  // takes the colour of the nearest final SfM point within this distance (map units), grey
+  // otherwise.
   double snapshot_color_radius = 0.5;
-  // A snapshot (the closed δO, with the caps and the Steiner vertices) loses its triangles
-  // with a vertex that has no SfM point within snapshot_color_radius, so that it looks like
-  // the observed surface it grows into.
+  // Such a closed snapshot (with the caps and the Steiner vertices) loses its triangles with a
+  // vertex that has no final SfM point within snapshot_color_radius, so that it looks like the
+  // observed surface it grows into. Where the map moved after the snapshot (a non-central
+  // run's early keyframes) that leaves out observed triangles too; the observed snapshots need
+  // no such filter.
   bool snapshot_without_steiner = true;
 
   std::string Check() const;

@@ -143,8 +143,13 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
         keyframes_sculpted = sculptor->NumProcessedKeyframes();
         if (keyframes_sculpted < before) return;  // a replay began
         const size_t k = static_cast<size_t>(options.snapshot_every);
-        if (k > 0 && callbacks.snapshot && !stats.empty() && keyframes_sculpted / k != before / k)
-          callbacks.snapshot(stats.back().keyframe, sculptor->ExtractMesh());
+        if (k > 0 && callbacks.snapshot && !stats.empty() && keyframes_sculpted / k != before / k) {
+          PipelineSnapshot snapshot;
+          snapshot.last_keyframe = stats.back().keyframe;
+          snapshot.closed = sculptor->ExtractMesh();
+          snapshot.observed = sculptor->ExtractObservedMesh(&snapshot.observed_points);
+          callbacks.snapshot(snapshot);
+        }
       };
       while (std::optional<QueuedKeyframe> item = queue.Pop()) {
         const double waited =

@@ -63,12 +63,23 @@ struct PipelineProgress {
   double seconds = 0.0;
 };
 
+// The surface after a multiple of PipelineOptions::snapshot_every sculpted keyframes, as the
+// final one: the closed δO (ExtractMesh) and its observed part (ExtractObservedMesh, what
+// surface.ply holds at the end) with the point id of each of its vertices, so that it can be
+// coloured as surface.ply once the points have colours. Taking it smooths what waited for a
+// mesh to be taken (SmoothingOptions::every_keyframe off), once for both meshes.
+struct PipelineSnapshot {
+  KeyframeId last_keyframe;
+  TriangleMesh closed;
+  TriangleMesh observed;
+  std::vector<PointId> observed_points;
+};
+
 struct PipelineCallbacks {
   // From the calling thread, every progress_period seconds and once at the end.
   std::function<void(const PipelineProgress&)> progress;
-  // From the surface thread, after each multiple of snapshot_every sculpted keyframes (δO,
-  // closed).
-  std::function<void(const KeyframeId& last_keyframe, const TriangleMesh& mesh)> snapshot;
+  // From the surface thread, after each multiple of snapshot_every sculpted keyframes.
+  std::function<void(const PipelineSnapshot&)> snapshot;
 };
 
 struct PipelineResult {

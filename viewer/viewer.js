@@ -198,8 +198,10 @@
     } else {
       const s = snapshots[i];
       label = 'snapshot ' + (i + 1) + ' of ' + snapshots.length + ': after keyframe ' + s.keyframe +
-              ' (frame ' + keyframes[k].frame + '): δO, ' + s.triangles + ' of its ' +
-              s.closed_triangles + ' triangles (those with a Steiner vertex left out)';
+              ' (frame ' + keyframes[k].frame + '): ' +
+              (s.observed ? 'the observed surface of δO, ' + s.triangles + ' triangles'
+                          : 'δO, ' + s.triangles + ' of its ' + s.closed_triangles +
+                                ' triangles (those with a Steiner vertex left out)');
     }
     if (closures > 0) label += '\n' + closures + ' loop closure' + (closures > 1 ? 's' : '') + ' so far' +
                               (replayed && i < snapshots.length ? ': this snapshot follows the re-sculpting of the corrected map' : '');

@@ -111,7 +111,24 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
                            "reconstruct.json", "stats/keyframes.csv", "stats/sfm_frames.csv",
                            "sparse/cameras.txt", "sparse/images.txt", "sparse/points3D.txt"})
     EXPECT_TRUE(fs::exists(out / file)) << file;
-  EXPECT_FALSE(fs::is_empty(out / "snapshots"));
+  // Each snapshot: δO, closed (surface_<keyframe>.ply), and its observed part
+  // (observed_<keyframe>.ply), bounded, fewer triangles, a colour per vertex as surface.ply.
+  size_t observed_snapshots = 0;
+  for (const auto& entry : fs::directory_iterator(out / "snapshots")) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("observed_", 0) != 0) continue;
+    ++observed_snapshots;
+    const TriangleMesh observed_snapshot = ReadPlyMesh(entry.path());
+    const MeshCheckReport observed_check = CheckBounded(observed_snapshot);
+    EXPECT_TRUE(observed_check.ok) << name << ": " << observed_check.ToText();
+    EXPECT_EQ(observed_snapshot.colors.size(), observed_snapshot.vertices.size()) << name;
+    const TriangleMesh closed_snapshot =
+        ReadPlyMesh(out / "snapshots" / ("surface_" + name.substr(9)));
+    EXPECT_TRUE(CheckMesh(closed_snapshot).ok) << name;
+    EXPECT_LT(observed_snapshot.triangles.size(), closed_snapshot.triangles.size()) << name;
+    EXPECT_GT(observed_snapshot.triangles.size(), 0u) << name;
+  }
+  EXPECT_GE(observed_snapshots, 1u);
 
   // surface_closed.ply: δO, closed; surface.ply: its observed part, bounded, fewer triangles,
   // both with a colour per vertex (grey: the synthetic city is grey).

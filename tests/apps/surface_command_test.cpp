@@ -173,24 +173,41 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
     added += static_cast<long>(field("points_added"));
     rejected += static_cast<long>(field("points_rejected"));
     last_triangles = static_cast<long>(field("triangles"));
-    if (i % 4 == 0) expected_snapshots.push_back("surface_" + std::to_string(last_id) + ".ply");
+    if (i % 4 == 0) {
+      expected_snapshots.push_back("surface_" + std::to_string(last_id) + ".ply");
+      expected_snapshots.push_back("observed_" + std::to_string(last_id) + ".ply");
+    }
   }
-  // --snapshot-every 4: after keyframes 4, 8, 12 (sculpted), each a closed oriented manifold,
-  // the last one the final surface.
+  // --snapshot-every 4: after keyframes 4, 8, 12 (sculpted), each δO, a closed oriented
+  // manifold, and its observed part, with boundary, whose triangles are δO's; the last ones the
+  // final surfaces.
   std::vector<std::string> snapshots;
   for (const auto& entry : fs::directory_iterator(out / "snapshots")) {
-    snapshots.push_back(entry.path().filename().string());
-    const MeshCheckReport snapshot_report = CheckMesh(ReadPlyMesh(entry.path()));
-    EXPECT_TRUE(snapshot_report.ok) << entry.path() << ": " << snapshot_report.ToText();
+    const std::string name = entry.path().filename().string();
+    snapshots.push_back(name);
+    if (name.rfind("observed_", 0) == 0) {
+      const TriangleMesh observed_snapshot = ReadPlyMesh(entry.path());
+      const MeshCheckReport snapshot_report = CheckMesh(observed_snapshot, bounded);
+      EXPECT_TRUE(snapshot_report.ok) << entry.path() << ": " << snapshot_report.ToText();
+      EXPECT_EQ(observed_snapshot.colors.size(), observed_snapshot.vertices.size());
+      ExpectTrianglesSubset(observed_snapshot,
+                            ReadPlyMesh(out / "snapshots" / ("surface_" + name.substr(9))));
+    } else {
+      const MeshCheckReport snapshot_report = CheckMesh(ReadPlyMesh(entry.path()));
+      EXPECT_TRUE(snapshot_report.ok) << entry.path() << ": " << snapshot_report.ToText();
+    }
   }
   std::sort(snapshots.begin(), snapshots.end());
   std::sort(expected_snapshots.begin(), expected_snapshots.end());
   EXPECT_EQ(snapshots, expected_snapshots);
   ASSERT_FALSE(expected_snapshots.empty());
   if (keyframes % 4 == 0) {
-    EXPECT_EQ(ReadPlyMesh(out / "snapshots" / ("surface_" + std::to_string(last_id) + ".ply"))
-                  .triangles.size(),
+    const std::string last = std::to_string(last_id) + ".ply";
+    EXPECT_EQ(ReadPlyMesh(out / "snapshots" / ("surface_" + last)).triangles.size(),
               closed.triangles.size());
+    const TriangleMesh last_observed = ReadPlyMesh(out / "snapshots" / ("observed_" + last));
+    EXPECT_EQ(last_observed.triangles, mesh.triangles);
+    EXPECT_EQ(last_observed.colors, mesh.colors);
   }
   EXPECT_EQ(last_triangles, static_cast<long>(closed.triangles.size()));
   EXPECT_GT(added, 1000);

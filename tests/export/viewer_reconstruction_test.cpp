@@ -20,59 +20,22 @@
 #include "tests/apps/run_omnisculpt.h"
 #include "tests/calib/io_temp_dir.h"
 #include "tests/export/strict_glb_reader.h"
+#include "tests/export/viewer_data.h"
 
 namespace omni {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::Base64Decoded;
 using testing::CommandResult;
+using testing::ExpectSameMesh;
 using testing::GlbContent;
 using testing::ReadBytes;
 using testing::ReadGlbStrictly;
 using testing::RunOmnisculpt;
+using testing::ScriptValue;
 
 const fs::path kReconstruction(OMNI_VIEWER_REC_DIR);
-
-// The mesh of a .glb equals the PLY mesh: every vertex (as float), triangle and colour.
-void ExpectSameMesh(const testing::GlbPrimitive& glb, const TriangleMesh& ply) {
-  ASSERT_EQ(glb.positions.size(), ply.vertices.size());
-  ASSERT_EQ(glb.indices.size(), 3 * ply.triangles.size());
-  ASSERT_EQ(glb.colors.size(), ply.colors.size());
-  size_t differing = 0;
-  for (size_t i = 0; i < ply.vertices.size(); ++i) {
-    if (glb.positions[i] != ply.vertices[i].cast<float>()) ++differing;
-    if (!ply.colors.empty() && glb.colors[i] != ply.colors[i].cast<int>()) ++differing;
-  }
-  for (size_t t = 0; t < ply.triangles.size(); ++t)
-    for (int k = 0; k < 3; ++k)
-      if (glb.indices[3 * t + k] != static_cast<uint32_t>(ply.triangles[t][k])) ++differing;
-  EXPECT_EQ(differing, 0u);
-}
-
-std::string Base64Decoded(const std::string& text) {
-  std::string out;
-  int value = 0, bits = -8;
-  for (char c : text) {
-    const char* alphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    const char* at = std::strchr(alphabet, c);
-    if (c == '=' || !at || !c) break;
-    value = (value << 6) | static_cast<int>(at - alphabet);
-    bits += 6;
-    if (bits >= 0) {
-      out.push_back(static_cast<char>((value >> bits) & 0xFF));
-      bits -= 8;
-    }
-  }
-  return out;
-}
-
-// The value a data script of the viewer assigns: "window.X = <json>;" or "...[key] = <json>;".
-nlohmann::json ScriptValue(const fs::path& script) {
-  const std::string text = ReadBytes(script);
-  const size_t equals =
-      text.rfind("] = ") != std::string::npos ? text.rfind("] = ") + 4 : text.find(" = ") + 3;
-  return nlohmann::json::parse(text.substr(equals, text.rfind(';') - equals));
-}
 
 // A copy of the reconstruction (the browser test writes the fixture's own viewer/).
 fs::path CopyOfReconstruction(const testing::TempDir& dir) {
@@ -196,26 +159,36 @@ TEST(ExportViewerReconstruction, ViewWritesTheDataOfTheReconstruction) {
   ASSERT_EQ(surface.error, "");
   ExpectSameMesh(surface.meshes.at("surface"), ReadPlyMesh(rec / "surface.ply"));
   EXPECT_EQ(surface.meshes.at("points").positions.size(), summary["points"].get<size_t>());
-  // One snapshot per snapshots/surface_<keyframe>.ply, in keyframe order, each a valid .glb
-  // with the triangles the scene says and no more than the closed mesh has.
-  size_t snapshot_files = 0;
-  for (const auto& entry : fs::directory_iterator(rec / "snapshots"))
-    snapshot_files += entry.path().extension() == ".ply";
-  ASSERT_GE(snapshot_files, 2u);
-  ASSERT_EQ(scene["snapshots"].size(), snapshot_files);
+  // One snapshot per keyframe of snapshots/, in keyframe order, each the .glb of its observed
+  // surface (observed_<keyframe>.ply, coloured) whole, a part of its closed δO
+  // (surface_<keyframe>.ply) that holds most of it: the viewer needs neither the final points
+  // nor their positions, although in non-central mode the map moves after the first keyframes.
+  size_t observed_files = 0, closed_files = 0;
+  for (const auto& entry : fs::directory_iterator(rec / "snapshots")) {
+    const std::string name = entry.path().filename().string();
+    observed_files += name.rfind("observed_", 0) == 0 && entry.path().extension() == ".ply";
+    closed_files += name.rfind("surface_", 0) == 0 && entry.path().extension() == ".ply";
+  }
+  ASSERT_GE(observed_files, 2u);
+  EXPECT_EQ(closed_files, observed_files);
+  ASSERT_EQ(scene["snapshots"].size(), observed_files);
   long last_keyframe = -1;
   for (const nlohmann::json& s : scene["snapshots"]) {
     EXPECT_GT(s["keyframe"].get<long>(), last_keyframe);
     last_keyframe = s["keyframe"];
+    EXPECT_TRUE(s["observed"].get<bool>());
     const GlbContent glb = ReadGlbStrictly(
         Base64Decoded(ScriptValue(viewer / s["file"].get<std::string>()).get<std::string>()));
     ASSERT_EQ(glb.error, "") << s["file"];
-    const TriangleMesh closed =
-        ReadPlyMesh(rec / "snapshots" / ("surface_" + std::to_string(last_keyframe) + ".ply"));
-    EXPECT_EQ(glb.meshes.at("surface").indices.size(), 3 * s["triangles"].get<size_t>());
-    EXPECT_EQ(s["closed_triangles"].get<size_t>(), closed.triangles.size());
-    EXPECT_LE(s["triangles"].get<size_t>(), closed.triangles.size());
-    EXPECT_GT(s["triangles"].get<size_t>(), closed.triangles.size() / 2);
+    const std::string number = std::to_string(last_keyframe);
+    const TriangleMesh observed = ReadPlyMesh(rec / "snapshots" / ("observed_" + number + ".ply"));
+    const TriangleMesh closed = ReadPlyMesh(rec / "snapshots" / ("surface_" + number + ".ply"));
+    ASSERT_EQ(observed.colors.size(), observed.vertices.size());
+    ExpectSameMesh(glb.meshes.at("surface"), observed);
+    EXPECT_EQ(s["triangles"].get<size_t>(), observed.triangles.size());
+    EXPECT_LT(s["triangles"].get<size_t>(), closed.triangles.size());
+    EXPECT_GT(s["triangles"].get<size_t>(), closed.triangles.size() * 3 / 4)
+        << "keyframe " << number;
   }
   // A second run replaces the viewer it wrote.
   EXPECT_EQ(RunOmnisculpt({"--quiet", "view", rec.string()}, dir.path()).exit_code, 0);

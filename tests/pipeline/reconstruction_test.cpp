@@ -28,9 +28,7 @@ int SurfaceThreadNiceness(const Drive& drive, int surface_thread_nice) {
   options.surface_thread_nice = surface_thread_nice;
   std::atomic<int> niceness{-100};
   PipelineCallbacks callbacks;
-  callbacks.snapshot = [&niceness](const KeyframeId&, const TriangleMesh&) {
-    niceness = ThisThreadNiceness();
-  };
+  callbacks.snapshot = [&niceness](const PipelineSnapshot&) { niceness = ThisThreadNiceness(); };
   RunPipeline(drive, options, callbacks);
   return niceness;
 }

@@ -170,7 +170,8 @@ TEST(Smoothing, EveryKeyframeOrOnceAtTheEndAreAsCloseToTheTruth) {
 
 // By default the keyframes only note their vertices: no keyframe smooths, and the first mesh
 // taken smooths them all in one run; taking it again smooths nothing more; a mesh taken midway
-// (a snapshot) smooths what was noted until then, and the sculpting goes on from there.
+// (a snapshot: the closed δO and its observed part) smooths what was noted until then, once,
+// and the sculpting goes on from there.
 TEST(Smoothing, WaitsForTheSurfaceToBeTaken) {
   const auto drive = testing::NoisyStreet(24, 100, 0.05, 21);
   SculptorOptions options;
@@ -187,6 +188,8 @@ TEST(Smoothing, WaitsForTheSurfaceToBeTaken) {
     if (k == drive.size() / 2) {
       EXPECT_GT(candidates, 0u);
       const TriangleMesh snapshot = sculptor.ExtractMesh();
+      const TriangleMesh observed_snapshot = sculptor.ExtractObservedMesh();
+      EXPECT_FALSE(observed_snapshot.triangles.empty());
       midway_runs = sculptor.DeferredSmoothingStats().runs;
       EXPECT_EQ(midway_runs, 1u);
       EXPECT_GT(sculptor.DeferredSmoothingStats().vertices, 100u);

@@ -137,26 +137,55 @@ bool SearchEveryPixel(const std::vector<float>& reference, const cv::Mat& image,
 
 }  // namespace
 
+cv::Mat MapPointSearch::Patch(int slot) const {
+  // The pool is not written while the patch is read (Search is const).
+  return cv::Mat(patch_side_, patch_side_, CV_8UC1,
+                 const_cast<uint8_t*>(patches_.data()) +
+                     static_cast<size_t>(slot) * patch_side_ * patch_side_);
+}
+
 void MapPointSearch::Remember(int frame, const cv::Mat& prepared,
                               const std::vector<Eigen::Vector2d>& corners,
                               const std::vector<int>& tracks) {
   assert(corners.size() == tracks.size());
   if (!options_.enabled || prepared.empty()) return;
-  const int size = PatchSize(options_.half_window);
+  patch_side_ = PatchSize(options_.half_window);
+  const size_t area = static_cast<size_t>(patch_side_) * patch_side_;
   for (size_t i = 0; i < corners.size(); ++i) {
-    Reference& reference = references_[tracks[i]];
-    reference.frame = frame;
+    const int track = tracks[i];
+    assert(track >= 0);
+    if (static_cast<size_t>(track) >= slot_of_track_.size())
+      slot_of_track_.resize(std::max<size_t>(track + 1, 2 * slot_of_track_.size()), -1);
+    int& slot = slot_of_track_[track];
+    if (slot < 0) {
+      if (!free_slots_.empty()) {
+        slot = free_slots_.back();
+        free_slots_.pop_back();
+      } else {
+        slot = static_cast<int>(slot_frame_.size());
+        slot_frame_.push_back(-1);
+        slot_track_.push_back(-1);
+        patches_.resize(patches_.size() + area);
+      }
+      slot_track_[slot] = track;
+      ++num_references_;
+    }
+    slot_frame_[slot] = frame;
+    cv::Mat patch = Patch(slot);  // written in place: its size and type are getRectSubPix's
     cv::getRectSubPix(
-        prepared, cv::Size(size, size),
-        cv::Point2f(static_cast<float>(corners[i].x()), static_cast<float>(corners[i].y())),
-        reference.patch);
+        prepared, cv::Size(patch_side_, patch_side_),
+        cv::Point2f(static_cast<float>(corners[i].x()), static_cast<float>(corners[i].y())), patch);
   }
 }
 
 void MapPointSearch::Forget(int frame) {
-  for (auto it = references_.begin(); it != references_.end();)
-    it = frame - it->second.frame > options_.max_reference_age ? references_.erase(it)
-                                                               : std::next(it);
+  for (size_t slot = 0; slot < slot_frame_.size(); ++slot) {
+    if (slot_frame_[slot] < 0 || frame - slot_frame_[slot] <= options_.max_reference_age) continue;
+    slot_of_track_[slot_track_[slot]] = -1;
+    slot_frame_[slot] = -1;
+    free_slots_.push_back(static_cast<int>(slot));
+    --num_references_;
+  }
 }
 
 std::vector<MapPointSearch::Match> MapPointSearch::Search(
@@ -198,13 +227,16 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
     const Camera& camera = rig_.cameras[c];
     for (int index : by_camera[c]) {
       const MapPointProjection& candidate = candidates[index];
-      const auto reference = references_.find(candidate.track);
-      if (reference == references_.end()) continue;
+      const int slot =
+          candidate.track >= 0 && static_cast<size_t>(candidate.track) < slot_of_track_.size()
+              ? slot_of_track_[candidate.track]
+              : -1;
+      if (slot < 0) continue;
       Eigen::Vector2d pixel;
       if (!camera.Project(candidate.bearing, &pixel) || !camera.IsInImage(pixel)) continue;
       const Eigen::Vector2d predicted = InputToPreparedPixel(pixel, downscale_);
       if (options_.search_every_pixel) {
-        const cv::Mat& patch = reference->second.patch;
+        const cv::Mat patch = Patch(slot);
         if (!NormalisedWindowAt(patch, patch.cols / 2, patch.rows / 2, options_.half_window,
                                 &reference_window))
           continue;
@@ -247,7 +279,7 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
             // Zncc(reference, corner), with each window normalised once.
             if (!reference_ready) {
               reference_ready = true;
-              const cv::Mat& patch = reference->second.patch;
+              const cv::Mat patch = Patch(slot);
               reference_ok = NormalisedWindowAt(patch, patch.cols / 2, patch.rows / 2,
                                                 options_.half_window, &reference_window);
             }

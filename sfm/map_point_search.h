@@ -23,7 +23,6 @@
 #include <functional>
 #include <opencv2/core.hpp>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "calib/rig.h"
@@ -92,7 +91,7 @@ class MapPointSearch {
                 const std::vector<int>& tracks);
   // Forgets the references older than max_reference_age frames before `frame`.
   void Forget(int frame);
-  size_t NumReferences() const { return references_.size(); }
+  size_t NumReferences() const { return num_references_; }
 
   struct Match {
     int candidate = -1;  // index into the candidates
@@ -111,14 +110,19 @@ class MapPointSearch {
                             const std::vector<std::vector<char>>& eligible) const;
 
  private:
-  struct Reference {
-    int frame = -1;
-    cv::Mat patch;  // 8-bit, the corner at its centre pixel
-  };
+  // The 8-bit reference patch of slot `slot` (the corner at its centre pixel).
+  cv::Mat Patch(int slot) const;
+
   Rig rig_;
   MapPointSearchOptions options_;
   double downscale_ = 1.0;
-  std::unordered_map<int, Reference> references_;  // by track
+  // The references in slots of one pool (no allocation per track): each slot's patch, the frame
+  // it was taken in (−1: a free slot) and its track; the free slots; the slot of each track, by
+  // track id (the front end numbers tracks densely), −1 for none.
+  int patch_side_ = 0;
+  std::vector<uint8_t> patches_;
+  std::vector<int> slot_frame_, slot_track_, free_slots_, slot_of_track_;
+  size_t num_references_ = 0;
 };
 
 }  // namespace omni

@@ -1,12 +1,12 @@
 #include "sfm/bundle_adjustment.h"
 
 #include <ceres/ceres.h>
-#include <ceres/rotation.h>
 
 #include <cassert>
 #include <cmath>
 #include <memory>
 #include <sstream>
+#include <type_traits>
 
 #include "calib/error.h"
 #include "sfm/internal/angular_residual.h"
@@ -49,50 +49,35 @@ ObservationFrame MakeObservationFrame(const Rig& rig, BundleAdjustmentOptions::M
 
 // The angular residual of one observation (internal::AngularResidualModel) as a Ceres cost:
 // parameters world_from_rig rotation (Eigen quaternion x y z w), world_from_rig translation,
-// point in the world, and with ScaledOffset the offsets' scale s (x_frame = A x_rig + s c).
-// Jacobians in closed form: the automatic ones cost several times more.
-class AngularResidual : public ceres::SizedCostFunction<2, 4, 3, 3> {
+// point in the world, and with kScaledOffset the offsets' scale s (x_frame = A x_rig + s c;
+// otherwise s = 1). Jacobians in closed form: the automatic ones cost several times more.
+template <bool kScaledOffset>
+class AngularResidualCost
+    : public std::conditional_t<kScaledOffset, ceres::SizedCostFunction<2, 4, 3, 3, 1>,
+                                ceres::SizedCostFunction<2, 4, 3, 3>> {
  public:
   // Default-constructed in one array per solve (no allocation per observation), then Set.
-  AngularResidual() = default;
+  AngularResidualCost() = default;
   void Set(const ObservationFrame& frame) {
     model_ = internal::AngularResidualModel(frame.frame_from_rig_rotation,
                                             frame.frame_from_rig_translation, frame.bearing);
   }
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    model_.Evaluate(parameters[0], parameters[1], parameters[2], 1.0, residuals,
-                    jacobians != nullptr ? jacobians[0] : nullptr,
-                    jacobians != nullptr ? jacobians[1] : nullptr,
-                    jacobians != nullptr ? jacobians[2] : nullptr, nullptr);
+    const auto jacobian = [jacobians](int block) {
+      return jacobians != nullptr ? jacobians[block] : nullptr;
+    };
+    model_.Evaluate(parameters[0], parameters[1], parameters[2],
+                    kScaledOffset ? parameters[3][0] : 1.0, residuals, jacobian(0), jacobian(1),
+                    jacobian(2), kScaledOffset ? jacobian(3) : nullptr);
     return true;
   }
 
  private:
   internal::AngularResidualModel model_;
 };
-
-class ScaledOffsetAngularResidual : public ceres::SizedCostFunction<2, 4, 3, 3, 1> {
- public:
-  // Default-constructed in one array per solve (no allocation per observation), then Set.
-  ScaledOffsetAngularResidual() = default;
-  void Set(const ObservationFrame& frame) {
-    model_ = internal::AngularResidualModel(frame.frame_from_rig_rotation,
-                                            frame.frame_from_rig_translation, frame.bearing);
-  }
-  bool Evaluate(double const* const* parameters, double* residuals,
-                double** jacobians) const override {
-    model_.Evaluate(parameters[0], parameters[1], parameters[2], parameters[3][0], residuals,
-                    jacobians != nullptr ? jacobians[0] : nullptr,
-                    jacobians != nullptr ? jacobians[1] : nullptr,
-                    jacobians != nullptr ? jacobians[2] : nullptr,
-                    jacobians != nullptr ? jacobians[3] : nullptr);
-    return true;
-  }
-
- private:
-  internal::AngularResidualModel model_;
-};
+using AngularResidual = AngularResidualCost<false>;
+using ScaledOffsetAngularResidual = AngularResidualCost<true>;
 
 bool EstimatesOffsetScale(const BundleAdjustmentOptions& options) {
   return options.estimate_offset_scale &&

@@ -207,7 +207,9 @@ TEST_F(SfmCommandShortDrive, NonCentralFramePosesFollowTheirKeyframes) {
 // final map (the default) are as accurate as the keyframes, and more than their pose between
 // their keyframes (`--no-final-frame-refinement`). Measured, seven runs each (docs/figures.md
 // F39): frames 0.46 to 0.57 cm with keyframes 0.45 to 0.59 cm; without, frames 0.66 to 0.91 cm,
-// 1.1 to 1.6 times the keyframes'.
+// 1.1 to 1.6 times the keyframes'. Non-central runs of this drive move by more than that with
+// the last bits of the arithmetic (figures.md F48: frames 0.54, 0.67 and 0.96 cm from three
+// builds that differ only in rounding), so the absolute bound is 1.2 cm (0.025 % of the length).
 TEST_F(SfmCommandShortDrive, NonCentralFramesRefinedOnTheFinalMapAreAsAccurateAsKeyframes) {
   std::vector<StampedPose> gt = ReadTum(drive_ / "gt" / "poses.tum");
   gt.resize(60);
@@ -239,7 +241,7 @@ TEST_F(SfmCommandShortDrive, NonCentralFramesRefinedOnTheFinalMapAreAsAccurateAs
                               << " m";
   EXPECT_LT(refined, 1.15 * refined_keyframes)
       << "frames " << refined << " m, keyframes " << refined_keyframes << " m";
-  EXPECT_LT(refined, 0.008) << "frames " << refined << " m";
+  EXPECT_LT(refined, 0.012) << "frames " << refined << " m";
 }
 
 TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {

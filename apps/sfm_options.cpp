@@ -39,6 +39,17 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "and stamped as in the whole drive (segments of a drive; see `merge`)")
       ->excludes(max_frames);
   command
+      ->add_option("--resection-prior-share", o->sfm.tracker.resection_prior_share,
+                   "A frame's pose predicted by the motion model is taken without the "
+                   "resection's RANSAC when, refined, it explains this share of the frame's "
+                   "observations of map points (1: always the RANSAC)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  command->add_flag("--resection-prior-after-search",
+                    o->sfm.tracker.resection_prior_after_search,
+                    "After the map-point search, the frame's first pose is kept without the "
+                    "RANSAC when it keeps at least its inliers");
+  command
       ->add_option("--frame-ray-step", o->sfm.tracker.frame_ray_step,
                    "The points handed to the surface also carry the rays of every N-th tracked "
                    "frame between keyframes (0: keyframe rays only)")

@@ -153,7 +153,7 @@ void MapPointSearch::Remember(int frame, const cv::Mat& prepared,
   const size_t area = static_cast<size_t>(patch_side_) * patch_side_;
   for (size_t i = 0; i < corners.size(); ++i) {
     const int track = tracks[i];
-    assert(track >= 0);
+    if (track < 0) continue;  // a corner without a track has no reference
     if (static_cast<size_t>(track) >= slot_of_track_.size())
       slot_of_track_.resize(std::max<size_t>(track + 1, 2 * slot_of_track_.size()), -1);
     int& slot = slot_of_track_[track];

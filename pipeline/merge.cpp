@@ -556,7 +556,9 @@ void AdjustMergedMap(const Rig& rig,
 BundleAdjustmentOptions MergeOptions::DefaultGlobalAdjustment() {
   BundleAdjustmentOptions options;
   options.linear_solver = BundleAdjustmentOptions::LinearSolver::kSparseSchur;
-  options.num_threads = 2;
+  // One thread: with more, Ceres sums the reduced system in the order its threads reach it and
+  // two merges of the same runs differ in their last bits (as the SfM's global adjustments).
+  options.num_threads = 1;
   options.max_iterations = 30;
   return options;
 }

@@ -163,7 +163,8 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   EXPECT_EQ(again.exit_code, 2) << again.err;
 }
 
-// `sfm` runs (sfm.json, no surface of their own) merge as reconstructions do.
+// `sfm` runs (sfm.json, no surface of their own) merge as reconstructions do, and two merges of
+// the same runs write the same poses byte for byte.
 TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
   const fs::path scratch = ScratchDir("sfm_runs");
   std::string error;
@@ -182,6 +183,16 @@ TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
   EXPECT_TRUE(summary["overlaps"][0]["verified"].get<bool>());
   EXPECT_EQ(summary["overlaps"][0]["shared_frames"], 10);
   EXPECT_LT(PoseRms(city, drive), 0.01 * 40.0);  // under 1 % of the ~40 m driven
+  const fs::path city_again = scratch / "city_again";
+  const auto again = RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(),
+                                    (scratch / "b").string(), "--out", city_again.string()},
+                                   scratch);
+  ASSERT_EQ(again.exit_code, 0) << again.err;
+  for (const char* file : {"poses.tum", "frame_poses.tum"}) {
+    if (!fs::exists(city / file)) continue;
+    EXPECT_EQ(ReadTextFile(city / file), ReadTextFile(city_again / file)) << file;
+  }
+  EXPECT_TRUE(fs::exists(city / "poses.tum"));
 }
 
 // A drive with its own clock (frames.csv in epoch seconds with nanoseconds, as the real sets

@@ -45,8 +45,7 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "observations of map points (1: always the RANSAC)")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
-  command->add_flag("--resection-prior-after-search",
-                    o->sfm.tracker.resection_prior_after_search,
+  command->add_flag("--resection-prior-after-search", o->sfm.tracker.resection_prior_after_search,
                     "After the map-point search, the frame's first pose is kept without the "
                     "RANSAC when it keeps at least its inliers");
   command

@@ -168,7 +168,6 @@ void MapPointSearch::Remember(int frame, const cv::Mat& prepared,
         patches_.resize(patches_.size() + area);
       }
       slot_track_[slot] = track;
-      ++num_references_;
     }
     slot_frame_[slot] = frame;
     cv::Mat patch = Patch(slot);  // written in place: its size and type are getRectSubPix's
@@ -184,7 +183,6 @@ void MapPointSearch::Forget(int frame) {
     slot_of_track_[slot_track_[slot]] = -1;
     slot_frame_[slot] = -1;
     free_slots_.push_back(static_cast<int>(slot));
-    --num_references_;
   }
 }
 

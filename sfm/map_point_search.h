@@ -91,7 +91,7 @@ class MapPointSearch {
                 const std::vector<int>& tracks);
   // Forgets the references older than max_reference_age frames before `frame`.
   void Forget(int frame);
-  size_t NumReferences() const { return num_references_; }
+  size_t NumReferences() const { return slot_frame_.size() - free_slots_.size(); }
 
   struct Match {
     int candidate = -1;  // index into the candidates
@@ -122,7 +122,6 @@ class MapPointSearch {
   int patch_side_ = 0;
   std::vector<uint8_t> patches_;
   std::vector<int> slot_frame_, slot_track_, free_slots_, slot_of_track_;
-  size_t num_references_ = 0;
 };
 
 }  // namespace omni

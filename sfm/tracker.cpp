@@ -43,19 +43,12 @@ class TrackToPoint {
     assert(track >= 0 && point >= 0);
     if (static_cast<size_t>(track) >= point_.size())
       point_.resize(std::max<size_t>(track + 1, 2 * point_.size()), -1);
-    if (point_[track] < 0) ++size_;
     point_[track] = point;
   }
   void Erase(int track) {
-    if (Find(track) < 0) return;
-    point_[track] = -1;
-    --size_;
+    if (Find(track) >= 0) point_[track] = -1;
   }
-  void Clear() {
-    point_.clear();
-    size_ = 0;
-  }
-  size_t size() const { return size_; }
+  void Clear() { point_.clear(); }
   // f(track, point&) for every track with a point, by track id.
   template <typename F>
   void ForEach(F&& f) {
@@ -65,7 +58,6 @@ class TrackToPoint {
 
  private:
   std::vector<int> point_;
-  size_t size_ = 0;
 };
 
 }  // namespace

@@ -910,11 +910,8 @@ TEST(TrackerGlobalAdjustment, ATailAdjustmentMovesOnlyTheKeyframesFromTheFirstFr
     estimated.push_back(after[k].translation);
     truth.push_back(drive.world_from_rig[frames[k]].translation);
   }
-  const Sim3d truth_from_map = EstimateSim3Umeyama(estimated, truth, true);
-  double squared = 0.0;
-  for (int k = 0; k < num_keyframes; ++k)
-    squared += (truth_from_map * estimated[k] - truth[k]).squaredNorm();
-  EXPECT_LT(std::sqrt(squared / num_keyframes), 0.01 * drive.length);
+  EXPECT_LT(AlignmentRms(EstimateSim3Umeyama(estimated, truth, true), estimated, truth),
+            0.01 * drive.length);
 }
 
 }  // namespace

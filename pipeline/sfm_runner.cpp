@@ -539,7 +539,7 @@ SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunne
     const size_t first = static_cast<size_t>(options.first_frame);
     FramePrefetcher::Prepare detect;
     if (options.detect_ahead) {
-      detect = [&harris = options.tracks.harris](PrefetchedFrame* frame) {
+      detect = [harris = FrontEndHarrisOptions(options.tracks)](PrefetchedFrame* frame) {
         frame->corners = DetectFrameCorners(frame->images, harris);
       };
     }

@@ -14,6 +14,7 @@ namespace omni {
 
 std::string HarrisOptions::Check() const {
   if (max_corners < 1) return "max_corners: expected at least 1";
+  if (pool_corners < 0) return "pool_corners: expected 0 (none) or a number of corners";
   if (grid_cols < 1 || grid_rows < 1) return "grid_cols, grid_rows: expected at least 1";
   if (!(downscale >= 1.0)) return "downscale: expected a factor >= 1";
   if (block_size < 2) return "block_size: expected at least 2";
@@ -79,6 +80,7 @@ struct HarrisBuffers {
   std::vector<Corner> candidates;
   std::vector<int> bucket_of;
   std::vector<std::vector<Corner>> buckets;
+  std::vector<int> cell_head, cell_next;  // the kept corners by cell (the duplicate test)
 };
 
 HarrisBuffers& ThreadBuffers() {
@@ -262,7 +264,9 @@ void RefineCornersSubpixel(const cv::Mat& image, const HarrisOptions& options,
 
 }  // namespace
 
-std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOptions& options) {
+std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOptions& options,
+                                        size_t* num_first) {
+  if (num_first) *num_first = 0;
   ThrowIfInvalid(options.Check(), "HarrisOptions");
   if (prepared.type() != CV_8UC1) {
     throw std::invalid_argument("DetectHarrisCorners: expected an 8-bit grey image (PrepareImage)");
@@ -309,18 +313,30 @@ std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOpt
 
   // Each bucket keeps its strongest corners up to its quota; the quota left unused by poor
   // buckets goes to the others in turn, so the total stays max_corners when there are enough.
-  std::vector<int> taken(num_cells, 0);
-  int remaining = options.max_corners;
-  while (remaining > 0) {
-    int open_buckets = 0;
-    for (int i = 0; i < num_cells; ++i) open_buckets += taken[i] < bucket_size[i] ? 1 : 0;
-    if (open_buckets == 0) break;
-    const int quota = std::max(1, remaining / open_buckets);
-    for (int i = 0; i < num_cells && remaining > 0; ++i) {
-      const int extra = std::min(quota, std::min(bucket_size[i] - taken[i], remaining));
-      taken[i] += extra;
-      remaining -= extra;
+  // With a pool (HarrisOptions::pool_corners), the same share-out again for the pool's budget:
+  // each bucket's corners beyond its first share are its pool corners.
+  const auto share_out = [&](int budget, std::vector<int>* taken) {
+    taken->assign(num_cells, 0);
+    int remaining = budget;
+    while (remaining > 0) {
+      int open_buckets = 0;
+      for (int i = 0; i < num_cells; ++i) open_buckets += (*taken)[i] < bucket_size[i] ? 1 : 0;
+      if (open_buckets == 0) break;
+      const int quota = std::max(1, remaining / open_buckets);
+      for (int i = 0; i < num_cells && remaining > 0; ++i) {
+        const int extra = std::min(quota, std::min(bucket_size[i] - (*taken)[i], remaining));
+        (*taken)[i] += extra;
+        remaining -= extra;
+      }
     }
+  };
+  std::vector<int> first_share;
+  share_out(options.max_corners, &first_share);
+  std::vector<int> taken = first_share;
+  const bool pool = options.pool_corners > options.max_corners;
+  if (pool) {
+    share_out(options.pool_corners, &taken);
+    for (int i = 0; i < num_cells; ++i) taken[i] = std::max(taken[i], first_share[i]);
   }
   // Only the buckets that must drop corners are ordered (a partial selection of their best).
   std::vector<std::vector<Corner>>& buckets = buffers.buckets;
@@ -328,11 +344,20 @@ std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOpt
   for (auto& bucket : buckets) bucket.clear();
   for (size_t k = 0; k < candidates.size(); ++k) buckets[bucket_of[k]].push_back(candidates[k]);
   const auto stronger = [](const Corner& a, const Corner& b) { return a.response > b.response; };
+  // in_pool[k]: corners[k] is beyond its bucket's first share.
+  std::vector<char> in_pool;
   for (int i = 0; i < num_cells; ++i) {
     std::vector<Corner>& bucket = buckets[i];
     if (taken[i] < static_cast<int>(bucket.size()))
       std::nth_element(bucket.begin(), bucket.begin() + taken[i], bucket.end(), stronger);
+    if (pool && first_share[i] < taken[i])
+      std::nth_element(bucket.begin(), bucket.begin() + first_share[i], bucket.begin() + taken[i],
+                       stronger);
     corners.insert(corners.end(), bucket.begin(), bucket.begin() + taken[i]);
+    if (pool) {
+      in_pool.insert(in_pool.end(), first_share[i], 0);
+      in_pool.insert(in_pool.end(), taken[i] - first_share[i], 1);
+    }
   }
   if (corners.empty()) return corners;
 
@@ -343,36 +368,66 @@ std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOpt
   if (options.subpixel_iterations > 0) RefineCornersSubpixel(prepared, options, &points);
   // The subpixel step wanders off an edge-like or ill-defined corner: such corners are dropped,
   // as their windows slide along the edge when matched.
-  std::vector<Corner> refined_corners;
+  struct Refined {
+    Corner corner;
+    bool in_pool;
+  };
+  std::vector<Refined> refined_corners;
   refined_corners.reserve(corners.size());
   for (size_t i = 0; i < corners.size(); ++i) {
     const Eigen::Vector2d refined(points[i].x, points[i].y);
     if (options.subpixel_iterations > 0 &&
         !((refined - corners[i].pixel).norm() < options.max_subpixel_shift))
       continue;
-    refined_corners.push_back({refined, corners[i].response});
+    refined_corners.push_back({{refined, corners[i].response}, pool && in_pool[i] != 0});
   }
-  corners = std::move(refined_corners);
   // Two maxima of one physical corner may converge to the same place: keep the stronger (ties
-  // of response by position, so that the order does not depend on the selection above).
-  std::sort(corners.begin(), corners.end(), [](const Corner& a, const Corner& b) {
-    if (a.response != b.response) return a.response > b.response;
-    if (a.pixel.y() != b.pixel.y()) return a.pixel.y() < b.pixel.y();
-    return a.pixel.x() < b.pixel.x();
-  });
-  std::vector<Corner> distinct;
-  distinct.reserve(corners.size());
+  // of response by position, so that the order does not depend on the selection above). The
+  // pool comes after the first shares, so that those are exactly the corners without a pool, and
+  // a pool corner is dropped at a corner of the first shares.
+  std::sort(refined_corners.begin(), refined_corners.end(),
+            [](const Refined& ra, const Refined& rb) {
+              if (ra.in_pool != rb.in_pool) return rb.in_pool;
+              const Corner& a = ra.corner;
+              const Corner& b = rb.corner;
+              if (a.response != b.response) return a.response > b.response;
+              if (a.pixel.y() != b.pixel.y()) return a.pixel.y() < b.pixel.y();
+              return a.pixel.x() < b.pixel.x();
+            });
+  // The kept corners by cells of side min_separation (a linked list per cell): a candidate is
+  // compared with those of the 3 × 3 cells around it only.
+  corners.clear();
   const double min_separation = 0.5 * options.min_distance;
-  for (const Corner& corner : corners) {
+  const int cols = static_cast<int>(prepared.cols / min_separation) + 1;
+  const int rows = static_cast<int>(prepared.rows / min_separation) + 1;
+  std::vector<int>& head = buffers.cell_head;
+  std::vector<int>& next = buffers.cell_next;
+  head.assign(static_cast<size_t>(cols) * rows, -1);
+  next.clear();
+  const auto cell_of = [&](const Eigen::Vector2d& p, int* col, int* row) {
+    *col = std::clamp(static_cast<int>(p.x() / min_separation), 0, cols - 1);
+    *row = std::clamp(static_cast<int>(p.y() / min_separation), 0, rows - 1);
+  };
+  for (const Refined& candidate : refined_corners) {
+    int col = 0, row = 0;
+    cell_of(candidate.corner.pixel, &col, &row);
     bool duplicate = false;
-    for (const Corner& kept : distinct)
-      if ((kept.pixel - corner.pixel).squaredNorm() < min_separation * min_separation) {
-        duplicate = true;
-        break;
-      }
-    if (!duplicate) distinct.push_back(corner);
+    for (int r = std::max(0, row - 1); r <= std::min(rows - 1, row + 1) && !duplicate; ++r)
+      for (int c = std::max(0, col - 1); c <= std::min(cols - 1, col + 1) && !duplicate; ++c)
+        for (int k = head[static_cast<size_t>(r) * cols + c]; k >= 0; k = next[k])
+          if ((corners[k].pixel - candidate.corner.pixel).squaredNorm() <
+              min_separation * min_separation) {
+            duplicate = true;
+            break;
+          }
+    if (duplicate) continue;
+    int& cell_head = head[static_cast<size_t>(row) * cols + col];
+    next.push_back(cell_head);
+    cell_head = static_cast<int>(corners.size());
+    corners.push_back(candidate.corner);
+    if (num_first && !candidate.in_pool) ++*num_first;
   }
-  return distinct;
+  return corners;
 }
 
 double WorkingDownscale(int width, int height, int target_longest_side) {

@@ -16,6 +16,12 @@ namespace omni {
 struct HarrisOptions {
   // Corners kept per image (paper §2 / Mouragnon et al.: about 300–400 per image).
   int max_corners = 350;
+  // A pool of further corners, listed after the max_corners (each grid bucket's next strongest,
+  // shared out as for a budget of pool_corners in all): candidates for continuing the tracks of
+  // the frame before (TrackBuilderOptions::continuation_pool), so that a track does not end
+  // only because its corner ranked below the max_corners strongest in this frame. 0 or at most
+  // max_corners: no pool.
+  int pool_corners = 0;
   // The image is split into grid_cols × grid_rows buckets, each keeping at most its share.
   int grid_cols = 8;
   int grid_rows = 6;
@@ -62,6 +68,8 @@ Eigen::Vector2d PreparedToInputPixel(const Eigen::Vector2d& prepared, double dow
 Eigen::Vector2d InputToPreparedPixel(const Eigen::Vector2d& input, double downscale);
 
 // Corners of a prepared image, strongest first.
-std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOptions& options);
+// num_first, if given: how many of the corners come before the pool (all without one).
+std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOptions& options,
+                                        size_t* num_first = nullptr);
 
 }  // namespace omni

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cassert>
 #include <chrono>
+#include <limits>
 #include <stdexcept>
 #include <unordered_set>
 
@@ -26,6 +27,8 @@ std::string TrackBuilderOptions::Check() const {
   if (const std::string problem = descriptors.Check(); !problem.empty())
     return "descriptors." + problem;
   if (rematch_keyframes < 0) return "rematch_keyframes: expected 0 or more";
+  if (!(continuation_pool >= 1.0 && continuation_pool <= 10.0))
+    return "continuation_pool: expected a factor in [1, 10]";
   if (!(stereo_max_epipolar_angle > 0.0))
     return "stereo_max_epipolar_angle: expected a positive angle (radians)";
   return {};
@@ -59,15 +62,26 @@ TrackBuilder::TrackBuilder(const Rig& rig, const TrackBuilderOptions& options)
     }
 }
 
+HarrisOptions FrontEndHarrisOptions(const TrackBuilderOptions& options) {
+  HarrisOptions harris = options.harris;
+  harris.pool_corners =
+      options.continuation_pool > 1.0
+          ? static_cast<int>(std::lround(options.continuation_pool * harris.max_corners))
+          : 0;
+  return harris;
+}
+
 FrameCorners DetectFrameCorners(const std::vector<cv::Mat>& images, const HarrisOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   const int num_cameras = static_cast<int>(images.size());
   FrameCorners detected;
   detected.prepared.resize(num_cameras);
   detected.corners.resize(num_cameras);
+  detected.pool_begin.resize(num_cameras, 0);
   tbb::parallel_for(0, num_cameras, [&](int c) {
     detected.prepared[c] = PrepareImage(images[c], options);
-    for (const Corner& corner : DetectHarrisCorners(detected.prepared[c], options))
+    for (const Corner& corner :
+         DetectHarrisCorners(detected.prepared[c], options, &detected.pool_begin[c]))
       detected.corners[c].push_back(corner.pixel);
   });
   detected.seconds =
@@ -82,7 +96,7 @@ TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
                                 " images for a rig of " + std::to_string(rig_.NumCameras()) +
                                 " cameras");
   }
-  FrameCorners detected = DetectFrameCorners(images, options_.harris);
+  FrameCorners detected = DetectFrameCorners(images, FrontEndHarrisOptions(options_));
   timings_.detect += detected.seconds;
   return AddCorners(std::move(detected), predict);
 }
@@ -120,6 +134,9 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
 
   std::vector<cv::Mat>& prepared = detected.prepared;
   std::vector<std::vector<Eigen::Vector2d>>& corners = detected.corners;
+  // Corners given without their pool's place (FrameCorners made by hand) have no pool.
+  std::vector<size_t> pool_begin = detected.pool_begin;
+  pool_begin.resize(num_cameras, std::numeric_limits<size_t>::max());
   const auto start = std::chrono::steady_clock::now();
 
   // Search regions (the predictor reads the tracker: called here, not in the parallel part).
@@ -146,7 +163,7 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
     const CameraState& source = sources[c];
     if (source.corners.empty() || corners[c].empty()) return;
     matches[c] = MatchZncc(source.prepared, source.corners, regions[c], prepared[c], corners[c],
-                           options_.zncc);
+                           options_.zncc, pool_begin[c]);
   });
 
   for (int c = 0; c < num_cameras; ++c) {
@@ -170,6 +187,26 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
       state.flow = Eigen::Vector2d(dx[dx.size() / 2], dy[dy.size() / 2]);
     } else if (frame.relocalising) {
       state.flow = Eigen::Vector2d::Zero();
+    }
+    // The pool (FrontEndHarrisOptions): the corners that continue a track, then the others in
+    // the detector's order (its max_corners first) up to max_corners.
+    const int budget = options_.harris.max_corners;
+    if (static_cast<int>(corners[c].size()) > budget) {
+      int kept = 0;
+      std::vector<char> keep(corners[c].size(), 0);
+      for (size_t i = 0; i < tracks.size(); ++i)
+        if (tracks[i] >= 0) keep[i] = 1, ++kept;
+      for (size_t i = 0; i < keep.size() && kept < budget; ++i)
+        if (!keep[i]) keep[i] = 1, ++kept;
+      size_t out = 0;
+      for (size_t i = 0; i < keep.size(); ++i) {
+        if (!keep[i]) continue;
+        corners[c][out] = corners[c][i];
+        tracks[out] = tracks[i];
+        ++out;
+      }
+      corners[c].resize(out);
+      tracks.resize(out);
     }
     for (int& track : tracks)
       if (track < 0) track = next_track_++;

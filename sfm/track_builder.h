@@ -56,9 +56,20 @@ struct TrackBuilderOptions {
   // MatchOverlappingCameras: a match is kept when each ray passes within this angle of the
   // other camera's epipolar plane (radians) and the two rays meet in front of both cameras.
   double stereo_max_epipolar_angle = 0.004;
+  // The tracks of the frame before are continued among this many times harris.max_corners
+  // corners of each image (a pool: HarrisOptions::pool_corners), and the frame keeps every
+  // corner that continues a track plus the strongest of the others up to max_corners: a track
+  // no longer ends because its corner fell just below the max_corners strongest of the next
+  // frame, while the corners per image stay max_corners. 1: no pool (each frame's
+  // max_corners strongest only).
+  double continuation_pool = 2.0;
 
   std::string Check() const;
 };
+
+// The Harris options of the front end's detection: options.harris with its pool
+// (continuation_pool). DetectFrameCorners for TrackBuilder::AddDetectedFrame takes these.
+HarrisOptions FrontEndHarrisOptions(const TrackBuilderOptions& options);
 
 struct TrackedFrame {
   std::vector<TrackObservation> observations;
@@ -70,13 +81,16 @@ struct TrackedFrame {
 };
 
 // The detection step of TrackBuilder::AddFrame for one frame: each camera's prepared image
-// (PrepareImage) and its Harris corners (prepared pixels, strongest first). It needs nothing
+// (PrepareImage) and its Harris corners (prepared pixels, strongest first; with a pool, the pool
+// after them). It needs nothing
 // of the tracker, so a caller may compute it ahead, on another thread (the SfM loop does it on
 // its prefetch thread while the frame before is tracked).
 struct FrameCorners {
   std::vector<cv::Mat> prepared;                      // one per camera
   std::vector<std::vector<Eigen::Vector2d>> corners;  // one list per camera
-  double seconds = 0.0;                               // wall time of the detection
+  // Per camera: where the pool begins in its list (its size without a pool).
+  std::vector<size_t> pool_begin;
+  double seconds = 0.0;  // wall time of the detection
 };
 
 // The cameras detected in parallel (TBB).
@@ -97,7 +111,8 @@ class TrackBuilder {
   // images[c] is camera c's image of the frame (8-bit grey or colour, the size rig.json gives).
   TrackedFrame AddFrame(const std::vector<cv::Mat>& images, const PixelPredictor& predict = {});
   // The same with the frame's corners detected beforehand (DetectFrameCorners with
-  // options.harris); the result is the same. Their detection time counts as detect_ahead.
+  // FrontEndHarrisOptions(options)); the result is the same. Their detection time counts as
+  // detect_ahead.
   TrackedFrame AddDetectedFrame(FrameCorners detected, const PixelPredictor& predict = {});
   // What the tracker made of the frame just added: a keyframe becomes the reference of a later
   // re-localisation; after a frame not tracked, the next frames are matched against it.

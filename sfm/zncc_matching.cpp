@@ -217,6 +217,8 @@ std::string ZnccOptions::Check() const {
   if (!(subpixel_step > 0.0 && subpixel_step <= 1.0))
     return "subpixel_step: expected a value in (0, 1] pixels";
   if (subpixel_iterations < 0) return "subpixel_iterations: expected a non-negative count";
+  if (!(min_zncc_pool >= min_zncc && min_zncc_pool < 1.0))
+    return "min_zncc_pool: expected a value in [min_zncc, 1)";
   return {};
 }
 
@@ -234,7 +236,7 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
                                  const std::vector<Eigen::Vector2d>& corners1,
                                  const std::vector<SearchRegion>& regions, const cv::Mat& image2,
                                  const std::vector<Eigen::Vector2d>& corners2,
-                                 const ZnccOptions& options) {
+                                 const ZnccOptions& options, size_t pool_begin) {
   ThrowIfInvalid(options.Check(), "ZnccOptions");
   assert(regions.size() == corners1.size());
   assert(image1.type() == CV_8UC1 && image2.type() == CV_8UC1);
@@ -286,6 +288,7 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
   for (size_t i = 0; i < corners1.size(); ++i) {
     const int j = best1[i];
     if (j < 0 || score1[i] < options.min_zncc) continue;
+    if (static_cast<size_t>(j) >= pool_begin && score1[i] < options.min_zncc_pool) continue;
     if (!IsDistinctZncc(score1[i], second1[i], options.max_distance_ratio)) continue;
     if (options.mutual && best2[j] != static_cast<int>(i)) continue;
     ZnccMatch match{static_cast<int>(i), j, score1[i], corners2[j]};

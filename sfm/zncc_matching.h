@@ -5,6 +5,7 @@
 // with a distinctiveness (ratio) check and a mutual-best check.
 
 #include <Eigen/Core>
+#include <limits>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -18,6 +19,11 @@ struct ZnccOptions {
   // windows), the best candidate must satisfy d_best < max_distance_ratio · d_second.
   double max_distance_ratio = 0.8;
   bool mutual = true;  // the match must also be the best for the second image's corner
+  // A corner of the second image's pool (MatchZncc's pool_begin on; HarrisOptions::pool_corners)
+  // is a match only at this ZNCC or more: the pool offers each corner more candidates, so more
+  // chances of a look-alike above min_zncc, while a corner seen again one frame later scores
+  // far above it.
+  double min_zncc_pool = 0.9;
   // Refine the matched position in the second image to the subpixel maximum of the ZNCC
   // (separable parabola fits on samples subpixel_step apart, subpixel_iterations times), so
   // the match follows the first corner's window rather than the second detector's corner.
@@ -79,11 +85,13 @@ double Zncc(const cv::Mat& image1, const Eigen::Vector2d& pixel1, const cv::Mat&
             const Eigen::Vector2d& pixel2, int half_window);
 
 // corners1/corners2 are pixels of the prepared (grey 8-bit) images; regions has one entry per
-// corner of the first image. Each corner appears in at most one match.
+// corner of the first image. Each corner appears in at most one match. The corners2 from
+// pool_begin on are a pool (ZnccOptions::min_zncc_pool).
 std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
                                  const std::vector<Eigen::Vector2d>& corners1,
                                  const std::vector<SearchRegion>& regions, const cv::Mat& image2,
                                  const std::vector<Eigen::Vector2d>& corners2,
-                                 const ZnccOptions& options);
+                                 const ZnccOptions& options,
+                                 size_t pool_begin = std::numeric_limits<size_t>::max());
 
 }  // namespace omni

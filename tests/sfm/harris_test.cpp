@@ -159,6 +159,48 @@ TEST(Harris, CornersSpreadOverTheGrid) {
                 options.min_distance - 2.0 * options.subpixel_half_window);
 }
 
+TEST(Harris, APoolListsTheCornersWithoutItFirstThenFurtherCornersOfEachBucket) {
+  const cv::Mat image = MakeSyntheticTexture(640, 480, Eigen::Vector2d(3.3, 1.7), 900, 4);
+  HarrisOptions options;
+  options.max_corners = 300;
+  const cv::Mat prepared = PrepareImage(image, options);
+  const std::vector<Corner> without = DetectHarrisCorners(prepared, options);
+  options.pool_corners = 600;
+  const std::vector<Corner> with = DetectHarrisCorners(prepared, options);
+  ASSERT_GE(without.size(), 200u);
+  ASSERT_GT(with.size(), without.size() + 150);
+  EXPECT_LE(with.size(), 600u);
+  // The first corners are those without the pool, bit for bit and in order.
+  for (size_t i = 0; i < without.size(); ++i) {
+    ASSERT_EQ(with[i].pixel, without[i].pixel) << i;
+    ASSERT_EQ(with[i].response, without[i].response) << i;
+  }
+  // The pool: strongest first, each corner apart from every corner listed before it.
+  const double min_separation = 0.5 * options.min_distance;
+  for (size_t i = without.size(); i < with.size(); ++i) {
+    if (i > without.size()) {
+      EXPECT_LE(with[i].response, with[i - 1].response) << i;
+    }
+    for (size_t j = 0; j < i; ++j)
+      ASSERT_GE((with[i].pixel - with[j].pixel).norm(), min_separation) << i << " " << j;
+  }
+  // Spread as the first shares: every bucket holds some of the pool.
+  std::vector<int> per_cell(options.grid_cols * options.grid_rows, 0);
+  for (size_t i = without.size(); i < with.size(); ++i) {
+    const int col = std::clamp(static_cast<int>(with[i].pixel.x() * options.grid_cols / 640), 0,
+                               options.grid_cols - 1);
+    const int row = std::clamp(static_cast<int>(with[i].pixel.y() * options.grid_rows / 480), 0,
+                               options.grid_rows - 1);
+    ++per_cell[row * options.grid_cols + col];
+  }
+  EXPECT_GE(*std::min_element(per_cell.begin(), per_cell.end()), 1);
+  // A pool no larger than max_corners is no pool.
+  options.pool_corners = options.max_corners;
+  const std::vector<Corner> same = DetectHarrisCorners(prepared, options);
+  ASSERT_EQ(same.size(), without.size());
+  for (size_t i = 0; i < same.size(); ++i) ASSERT_EQ(same[i].pixel, without[i].pixel);
+}
+
 TEST(Harris, FlatImageHasNoCornersAndHalfTexturedImageKeepsThemOnTheTexture) {
   HarrisOptions options;
   const cv::Mat flat(240, 320, CV_8UC1, cv::Scalar(90));
@@ -200,6 +242,9 @@ TEST(HarrisOptions, CheckRejectsBadValues) {
   options = HarrisOptions();
   options.sobel_aperture = 4;
   EXPECT_FALSE(options.Check().empty());
+  options = HarrisOptions();
+  options.pool_corners = -1;
+  EXPECT_NE(options.Check().find("pool_corners"), std::string::npos);
 }
 
 TEST(Harris, BadOptionsThrowNamingTheField) {

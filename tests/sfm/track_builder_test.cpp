@@ -158,6 +158,10 @@ TEST(TrackBuilder, BadOptionsThrowNamingTheField) {
   options.search_radius = 0.0;
   EXPECT_TRUE(testing::ThrowsOptionsError([&] { TrackBuilder builder(rig, options); },
                                           "TrackBuilderOptions.search_radius: expected"));
+  options = TrackBuilderOptions();
+  options.continuation_pool = 0.5;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { TrackBuilder builder(rig, options); },
+                                          "TrackBuilderOptions.continuation_pool: expected"));
 }
 
 TEST(TrackBuilder, AFrameWithTheWrongNumberOfImagesThrows) {
@@ -185,7 +189,7 @@ TEST(TrackBuilder, CornersDetectedAheadGiveTheSameFrames) {
     for (int c = 0; c < 2; ++c)
       images.push_back(MakeSyntheticTexture(400, 300, f * shifts[c], 250, 30 + c));
     const TrackedFrame a = itself.AddFrame(images);
-    FrameCorners detected = DetectFrameCorners(images, options.harris);
+    FrameCorners detected = DetectFrameCorners(images, FrontEndHarrisOptions(options));
     ASSERT_EQ(detected.prepared.size(), 2u);
     EXPECT_EQ(detected.prepared[0].cols, 267);  // 400 / 1.5
     const TrackedFrame b = ahead.AddDetectedFrame(std::move(detected));
@@ -207,6 +211,80 @@ TEST(TrackBuilder, CornersDetectedAheadGiveTheSameFrames) {
   EXPECT_EQ(itself.StageTimings().detect_ahead, 0.0);
   EXPECT_EQ(ahead.StageTimings().detect, 0.0);
   EXPECT_GT(ahead.StageTimings().detect_ahead, 0.0);
+}
+
+// The pool (continuation_pool): a track goes on while its corner is among the pool of the next
+// frame, not only among its max_corners strongest, and each frame keeps at most max_corners
+// corners per image: the tracks' continuations, then the strongest others. Noise changes the
+// ranking of the corners from frame to frame, as the lighting and the viewpoint do.
+TEST(TrackBuilder, APoolContinuesMoreTracksWithinTheCornerBudget) {
+  Rig rig = test::TwoCameraRig();
+  const Eigen::Vector2d shifts[2] = {Eigen::Vector2d(6.0, 1.5), Eigen::Vector2d(-4.5, -3.0)};
+  TrackBuilderOptions options;
+  options.search_radius = 12.0;
+  options.harris.max_corners = 150;
+  TrackBuilderOptions no_pool = options;
+  no_pool.continuation_pool = 1.0;
+  ASSERT_GT(options.continuation_pool, 1.0);  // the default has a pool
+  TrackBuilder pooled(rig, options), plain(rig, no_pool);
+  cv::RNG rng(7);
+  int matched_pooled = 0, matched_plain = 0;
+  for (int f = 0; f < 6; ++f) {
+    std::vector<cv::Mat> images;
+    for (int c = 0; c < 2; ++c) {
+      cv::Mat image = MakeSyntheticTexture(400, 300, f * shifts[c], 400, 30 + c);
+      cv::Mat noise(image.size(), CV_16S);
+      rng.fill(noise, cv::RNG::NORMAL, 0, 6);
+      cv::Mat noisy;
+      image.convertTo(noisy, CV_16S);
+      noisy += noise;
+      noisy.convertTo(image, CV_8U);
+      images.push_back(image);
+    }
+    const TrackedFrame a = pooled.AddFrame(images);
+    const TrackedFrame b = plain.AddFrame(images);
+    std::map<int, int> per_camera;
+    for (const TrackObservation& o : a.observations) ++per_camera[o.camera];
+    for (const auto& [camera, count] : per_camera)
+      EXPECT_LE(count, options.harris.max_corners) << "frame " << f << " camera " << camera;
+    if (f == 0) {
+      // No track to continue: the first frame keeps the corners it keeps without a pool, then
+      // fills the budget with the pool's (the subpixel step and the duplicates drop some).
+      for (int c = 0; c < 2; ++c) {
+        std::vector<Eigen::Vector2d> pixels_a, pixels_b;
+        for (size_t i = 0; i < a.observations.size(); ++i)
+          if (a.observations[i].camera == c) pixels_a.push_back(a.pixels[i]);
+        for (size_t i = 0; i < b.observations.size(); ++i)
+          if (b.observations[i].camera == c) pixels_b.push_back(b.pixels[i]);
+        ASSERT_GE(pixels_a.size(), pixels_b.size());
+        for (size_t i = 0; i < pixels_b.size(); ++i) EXPECT_EQ(pixels_a[i], pixels_b[i]);
+      }
+    } else {
+      EXPECT_GE(a.num_corners, b.num_corners - 10) << "frame " << f;
+      matched_pooled += a.num_matched;
+      matched_plain += b.num_matched;
+    }
+  }
+  EXPECT_GT(matched_pooled, 1.15 * matched_plain)
+      << "pooled " << matched_pooled << " plain " << matched_plain;
+  // Unrelated images (look-alike blobs, a new texture every frame): every match is false. The
+  // pool offers more candidates, so min_zncc_pool holds its false matches to a few per cent of
+  // the corners offered (measured 3.1 %, 2.1 % without the pool; 4.5 % with the pool at
+  // min_zncc).
+  int false_pooled = 0, false_plain = 0, offered_pooled = 0, offered_plain = 0;
+  for (int f = 0; f < 6; ++f) {
+    std::vector<cv::Mat> images;
+    for (int c = 0; c < 2; ++c)
+      images.push_back(MakeSyntheticTexture(400, 300, {0, 0}, 400, 50 + 2 * f + c));
+    const TrackedFrame a = pooled.AddFrame(images);
+    const TrackedFrame b = plain.AddFrame(images);
+    false_pooled += a.num_matched;
+    false_plain += b.num_matched;
+    offered_pooled += a.num_corners;
+    offered_plain += b.num_corners;
+  }
+  EXPECT_LT(false_pooled, 0.04 * offered_pooled) << false_pooled << " of " << offered_pooled;
+  EXPECT_LT(false_plain, 0.04 * offered_plain) << false_plain << " of " << offered_plain;
 }
 
 }  // namespace

@@ -211,5 +211,29 @@ TEST(ZnccMatching, RatioCheckRejectsRepeatedPattern) {
   EXPECT_EQ(matches[0].index2, 0);
 }
 
+// A corner of the second image's pool (from pool_begin on) is a match only at min_zncc_pool:
+// the same window with noise scores between min_zncc and min_zncc_pool, so it matches as a
+// corner before the pool and not as one of the pool.
+TEST(ZnccMatching, APoolCornerNeedsTheHigherScore) {
+  const cv::Mat image1 = MakeSyntheticTexture(200, 200, Eigen::Vector2d::Zero(), 60, 8);
+  cv::Mat noise(image1.size(), CV_16S), noisy;
+  cv::RNG(3).fill(noise, cv::RNG::NORMAL, 0, 15);
+  image1.convertTo(noisy, CV_16S);
+  noisy += noise;
+  cv::Mat image2;
+  noisy.convertTo(image2, CV_8U);
+  const std::vector<Eigen::Vector2d> corners = {Eigen::Vector2d(90.0, 90.0)};
+  const std::vector<SearchRegion> regions = {{Eigen::Vector2d(90.0, 90.0), 10.0}};
+  ZnccOptions options;
+  const double score = Zncc(image1, corners[0], image2, corners[0], options.half_window);
+  ASSERT_GT(score, options.min_zncc);
+  ASSERT_LT(score, options.min_zncc_pool);
+  EXPECT_EQ(MatchZncc(image1, corners, regions, image2, corners, options).size(), 1u);
+  EXPECT_EQ(MatchZncc(image1, corners, regions, image2, corners, options, 1).size(), 1u);
+  EXPECT_TRUE(MatchZncc(image1, corners, regions, image2, corners, options, 0).empty());
+  options.min_zncc_pool = 0.5;
+  EXPECT_NE(options.Check().find("min_zncc_pool"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace omni

@@ -28,10 +28,11 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "and 1000)")
       ->capture_default_str();
   command
-      ->add_option("--continuation-pool", o->sfm.tracks.continuation_pool,
+      ->add_option("--continuation-pool", o->continuation_pool,
                    "The frame before's tracks are continued among this many times --corners "
                    "corners of each image; the frame keeps those that continue a track, then the "
-                   "strongest others, up to --corners (1: the --corners strongest only)")
+                   "strongest others, up to --corners (1: none; default 0: 2 in non-central "
+                   "mode, 1 in central mode)")
       ->capture_default_str();
   command
       ->add_option("--min-tracked-share", o->sfm.tracker.keyframes.min_tracked_share,
@@ -123,8 +124,13 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
                      "expected 0 (from the image size) or a factor of 1 or more");
   o->sfm.tracker.central = o->central ? true : o->non_central ? false : rig.central;
   if (o->corners < 0) throw InputError("", "--corners", "expected 0 (from the rig) or a count");
-  if (!(o->sfm.tracks.continuation_pool >= 1.0 && o->sfm.tracks.continuation_pool <= 10.0))
-    throw InputError("", "--continuation-pool", "expected a factor in [1, 10]");
+  if (o->continuation_pool != 0.0) {
+    if (!(o->continuation_pool >= 1.0 && o->continuation_pool <= 10.0))
+      throw InputError("", "--continuation-pool",
+                       "expected 0 (from the mode) or a factor in [1, 10]");
+    o->sfm.tracks.continuation_pool = o->continuation_pool;
+    o->sfm.continuation_pool_in_central_mode = true;
+  }
   o->sfm.tracks.harris.max_corners =
       o->corners > 0 ? o->corners : CornersPerImage(rig.NumCameras());
   if (o->downscale > 0.0) {

@@ -18,6 +18,8 @@ struct SfmCommandLine {
   double downscale = 0.0;
   // --corners; 0: from the rig, CornersPerImage(number of cameras).
   int corners = 0;
+  // --continuation-pool; 0: SfmRunnerOptions' rule (the pool in non-central mode only).
+  double continuation_pool = 0.0;
   // Central mode treats the camera centres as one point: a camera offset d seen at depth z
   // bends the rays by about d / z radians. The map's scale is unknown in central mode, so the
   // depth is the user's (metres; street facades are 5-20 m away); above this ratio of the

@@ -110,6 +110,13 @@ const char* SfmOutcomeName(SfmOutcome outcome) {
   return "unknown";
 }
 
+TrackBuilderOptions SfmFrontEndOptions(const SfmRunnerOptions& options) {
+  TrackBuilderOptions tracks = options.tracks;
+  if (options.tracker.central && !options.continuation_pool_in_central_mode)
+    tracks.continuation_pool = 1.0;
+  return tracks;
+}
+
 size_t SfmFramesToRun(const SfmRunnerOptions& options, size_t input_frames) {
   const size_t first = static_cast<size_t>(std::max(0, options.first_frame));
   const size_t available = input_frames > first ? input_frames - first : 0;
@@ -152,7 +159,7 @@ struct SfmRunner::Impl {
       : rig(rig_),
         options(options_),
         callbacks(callbacks_),
-        builder(rig_, options_.tracks),
+        builder(rig_, SfmFrontEndOptions(options_)),
         tracker(rig_, RunnerTrackerOptions(options_)) {
     if (options.loop_closure) closer = std::make_unique<LoopCloser>(rig, options.loop);
   }
@@ -539,7 +546,8 @@ SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunne
     const size_t first = static_cast<size_t>(options.first_frame);
     FramePrefetcher::Prepare detect;
     if (options.detect_ahead) {
-      detect = [harris = FrontEndHarrisOptions(options.tracks)](PrefetchedFrame* frame) {
+      detect = [harris =
+                    FrontEndHarrisOptions(SfmFrontEndOptions(options))](PrefetchedFrame* frame) {
         frame->corners = DetectFrameCorners(frame->images, harris);
       };
     }

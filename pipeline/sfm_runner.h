@@ -32,6 +32,11 @@ struct SfmRunnerOptions {
   // uses a core the tracking leaves idle; the result is the same either way.
   bool detect_ahead = true;
   TrackBuilderOptions tracks;
+  // Central mode (tracker.central): the front end continues its tracks without the pool
+  // (tracks.continuation_pool taken as 1) unless this is set. There the pool's longer tracks and
+  // fewer keyframes made the keyframes' ATE worse on every drive measured (demo, paper, short,
+  // and one pinhole camera), where in non-central mode it made it better (docs/figures.md F50).
+  bool continuation_pool_in_central_mode = false;
   TrackerOptions tracker;
   // Revisits recognised among the old keyframes, verified, and the map corrected (pose graph
   // and global bundle adjustment); the corrected finalised keyframes are handed over again.
@@ -251,6 +256,10 @@ class SfmRunner {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+// The front end's options of a run: `tracks`, without the pool in central mode unless
+// continuation_pool_in_central_mode.
+TrackBuilderOptions SfmFrontEndOptions(const SfmRunnerOptions& options);
 
 // The frames a run over an input of `input_frames` frames reads (first_frame and max_frames
 // applied).

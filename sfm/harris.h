@@ -67,8 +67,9 @@ double WorkingDownscale(int width, int height, int target_longest_side = 640);
 Eigen::Vector2d PreparedToInputPixel(const Eigen::Vector2d& prepared, double downscale);
 Eigen::Vector2d InputToPreparedPixel(const Eigen::Vector2d& input, double downscale);
 
-// Corners of a prepared image, strongest first.
-// num_first, if given: how many of the corners come before the pool (all without one).
+// Corners of a prepared image, strongest first; with a pool, the max_corners strongest first
+// (the corners without a pool), then the pool, strongest first. num_first, if given: how many
+// come before the pool (all without one).
 std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOptions& options,
                                         size_t* num_first = nullptr);
 

@@ -188,10 +188,10 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
     } else if (frame.relocalising) {
       state.flow = Eigen::Vector2d::Zero();
     }
-    // The pool (FrontEndHarrisOptions): the corners that continue a track, then the others in
-    // the detector's order (its max_corners first) up to max_corners.
+    // With a pool (FrontEndHarrisOptions): the corners that continue a track, then the others
+    // in the detector's order (those before the pool first) up to max_corners.
     const int budget = options_.harris.max_corners;
-    if (static_cast<int>(corners[c].size()) > budget) {
+    if (pool_begin[c] < corners[c].size() && static_cast<int>(corners[c].size()) > budget) {
       int kept = 0;
       std::vector<char> keep(corners[c].size(), 0);
       for (size_t i = 0; i < tracks.size(); ++i)

@@ -421,6 +421,9 @@ SfmRunResult SfmRunner::Finish() {
   s.tracker.Finish();
   s.HandOver();
   SfmRunResult& result = s.result;
+  const TrackBuilderOptions front_end = SfmFrontEndOptions(s.options);
+  result.corners_per_image = front_end.harris.max_corners;
+  result.continuation_pool = front_end.continuation_pool;
   if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {
     const auto ba_start = Clock::now();
     int points_merged = 0;

@@ -292,6 +292,11 @@ TEST(SfmCommand, PinholePresetPosesEveryFrameThroughTheFirstTurn) {
   EXPECT_GT(eval.gt_length, 40.0);
   EXPECT_LT(eval.ate_translation.rmse, 0.01 * eval.gt_length)
       << "ATE RMSE " << eval.ate_translation.rmse << " m over " << eval.gt_length << " m";
+  // One camera: central mode, 1000 corners per image, no pool.
+  const nlohmann::json summary = nlohmann::json::parse(testing::ReadTextFile(out / "sfm.json"));
+  EXPECT_EQ(summary.at("mode").get<std::string>(), "central");
+  EXPECT_EQ(summary.at("front_end").at("corners_per_image").get<int>(), 1000);
+  EXPECT_EQ(summary.at("front_end").at("continuation_pool").get<double>(), 1.0);
 }
 
 // Every frame of `drive` posed by `command` (sfm or reconstruct: frame_poses.tum against
@@ -406,6 +411,9 @@ TEST(SfmCommand, TheCarRigOnTheTinyDriveIsMetric) {
       nlohmann::json::parse(testing::ReadTextFile(dir.path() / "sfm" / "sfm.json"));
   EXPECT_EQ(summary.at("mode").get<std::string>(), "non-central");
   EXPECT_TRUE(summary.at("scale").at("metric").get<bool>()) << summary.at("scale");
+  // Six cameras: 350 corners per image, continued among a pool of twice that (non-central).
+  EXPECT_EQ(summary.at("front_end").at("corners_per_image").get<int>(), 350);
+  EXPECT_EQ(summary.at("front_end").at("continuation_pool").get<double>(), 2.0);
 }
 
 // A surround rig whose cameras are 1.5 m from their centre: central mode says in the log that

@@ -135,7 +135,7 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
   std::vector<cv::Mat>& prepared = detected.prepared;
   std::vector<std::vector<Eigen::Vector2d>>& corners = detected.corners;
   // Corners given without their pool's place (FrameCorners made by hand) have no pool.
-  std::vector<size_t> pool_begin = detected.pool_begin;
+  std::vector<size_t>& pool_begin = detected.pool_begin;
   pool_begin.resize(num_cameras, std::numeric_limits<size_t>::max());
   const auto start = std::chrono::steady_clock::now();
 

@@ -74,8 +74,8 @@ namespace {
 // that a frame allocates nothing of image size.
 struct HarrisBuffers {
   cv::Mat padded;
-  std::vector<int32_t> xx, xy, yy;  // products of the derivatives
-  std::vector<int32_t> row_sums;    // their sums over rows of three, one image after the other
+  std::vector<int32_t> products;  // one row's products of the derivatives: xx, xy, yy
+  std::vector<int32_t> row_sums;  // a ring of three rows' sums of three products, per channel
   cv::Mat response;
   std::vector<Corner> candidates;
   std::vector<int> bucket_of;
@@ -88,70 +88,99 @@ HarrisBuffers& ThreadBuffers() {
   return buffers;
 }
 
+// The kernels of HarrisResponse3x3, one row each. Their pointers are restricted parameters: the
+// rows of bytes could otherwise alias the integer rows as far as the compiler knows, which keeps
+// the loops from being vectorised.
+//
+// The 3×3 Sobel derivatives of the row `mid` (between `up` and `down`, each readable one byte
+// before and after the row) and their products.
+void SobelProductsRow(const uchar* __restrict up, const uchar* __restrict mid,
+                      const uchar* __restrict down, int cols, int32_t* __restrict xx,
+                      int32_t* __restrict xy, int32_t* __restrict yy) {
+  for (int x = 0; x < cols; ++x) {
+    const int32_t dx =
+        (up[x + 1] - up[x - 1]) + 2 * (mid[x + 1] - mid[x - 1]) + (down[x + 1] - down[x - 1]);
+    const int32_t dy =
+        (down[x - 1] + 2 * down[x] + down[x + 1]) - (up[x - 1] + 2 * up[x] + up[x + 1]);
+    xx[x] = dx * dx;
+    xy[x] = dx * dy;
+    yy[x] = dy * dy;
+  }
+}
+
+// Sums of three along a row, reflected at both ends (BORDER_REFLECT_101; cols >= 3).
+void SumsOfThreeRow(const int32_t* __restrict in, int cols, int32_t* __restrict out) {
+  out[0] = in[1] + in[0] + in[1];
+  for (int x = 1; x < cols - 1; ++x) out[x] = in[x - 1] + in[x] + in[x + 1];
+  out[cols - 1] = in[cols - 2] + in[cols - 1] + in[cols - 2];
+}
+
+// One row of the response from the row sums of the rows above, here and below (channels xx, xy,
+// yy one after the other, `width` apart): the block sums a, b, c of the scaled derivatives in
+// float, as OpenCV computes them, and det − k trace².
+void ResponseRow(const int32_t* __restrict above, const int32_t* __restrict here,
+                 const int32_t* __restrict below, int cols, size_t width, float scale2, float k,
+                 float* __restrict out) {
+  for (int x = 0; x < cols; ++x) {
+    const float a = static_cast<float>(above[x] + here[x] + below[x]) * scale2;
+    const float b =
+        static_cast<float>(above[width + x] + here[width + x] + below[width + x]) * scale2;
+    const float c =
+        static_cast<float>(above[2 * width + x] + here[2 * width + x] + below[2 * width + x]) *
+        scale2;
+    out[x] = a * c - b * b - k * (a + c) * (a + c);
+  }
+}
+
 // cv::cornerHarris(image, response, 3, 3, k) on exact integer sums: the 3×3 Sobel derivatives
 // dx, dy (BORDER_REFLECT_101 around the image), their products summed over 3×3 blocks (the
 // products reflected the same way), and the response det − k trace² of the derivatives scaled
 // as OpenCV scales them (1 / (4 · 3 · 255)). The block sums are exact integers, so the values
-// are OpenCV's float pipeline's to its rounding; each stage is one vectorisable pass.
+// are OpenCV's float pipeline's to its rounding. The image is streamed row by row: a row's
+// products and their sums along the row go into a ring of three rows, and each response row is
+// made from the ring as soon as the row below it is in, so the intermediate sums stay in cache
+// (three rows instead of six images of int32). The image has at least 3 rows and 3 columns.
 void HarrisResponse3x3(const cv::Mat& image, double k, HarrisBuffers* buffers) {
   const int rows = image.rows, cols = image.cols;
-  const size_t count = static_cast<size_t>(rows) * cols;
+  const size_t width = static_cast<size_t>(cols);
   cv::copyMakeBorder(image, buffers->padded, 1, 1, 1, 1, cv::BORDER_REFLECT_101);
-  buffers->xx.resize(count);
-  buffers->xy.resize(count);
-  buffers->yy.resize(count);
-  for (int y = 0; y < rows; ++y) {
-    // Padded row y + 1 is image row y; the pointers start at image column 0.
-    const uchar* up = buffers->padded.ptr<uchar>(y) + 1;
-    const uchar* mid = buffers->padded.ptr<uchar>(y + 1) + 1;
-    const uchar* down = buffers->padded.ptr<uchar>(y + 2) + 1;
-    int32_t* xx = buffers->xx.data() + static_cast<size_t>(y) * cols;
-    int32_t* xy = buffers->xy.data() + static_cast<size_t>(y) * cols;
-    int32_t* yy = buffers->yy.data() + static_cast<size_t>(y) * cols;
-    for (int x = 0; x < cols; ++x) {
-      const int32_t dx =
-          (up[x + 1] - up[x - 1]) + 2 * (mid[x + 1] - mid[x - 1]) + (down[x + 1] - down[x - 1]);
-      const int32_t dy =
-          (down[x - 1] + 2 * down[x] + down[x + 1]) - (up[x - 1] + 2 * up[x] + up[x + 1]);
-      xx[x] = dx * dx;
-      xy[x] = dx * dy;
-      yy[x] = dy * dy;
-    }
-  }
-  // Row sums of three (reflected at both ends), then column sums of three and the response,
-  // in float as OpenCV computes it (a, b, c: the block sums of the scaled derivatives).
-  buffers->row_sums.resize(3 * count);
-  int32_t* sums[3] = {buffers->row_sums.data(), buffers->row_sums.data() + count,
-                      buffers->row_sums.data() + 2 * count};
-  const int32_t* products[3] = {buffers->xx.data(), buffers->xy.data(), buffers->yy.data()};
-  for (int channel = 0; channel < 3; ++channel) {
-    for (int y = 0; y < rows; ++y) {
-      const int32_t* in = products[channel] + static_cast<size_t>(y) * cols;
-      int32_t* out = sums[channel] + static_cast<size_t>(y) * cols;
-      out[0] = in[1] + in[0] + in[1];
-      for (int x = 1; x < cols - 1; ++x) out[x] = in[x - 1] + in[x] + in[x + 1];
-      out[cols - 1] = in[cols - 2] + in[cols - 1] + in[cols - 2];
-    }
-  }
+  buffers->products.resize(3 * width);
+  buffers->row_sums.resize(9 * width);  // ring slot r % 3, channel c: (3 (r % 3) + c) · cols
+  int32_t* const products = buffers->products.data();
+  // Row r's products, then their sums of three along the row, into its ring slot.
+  const auto add_row = [&](int r) {
+    // Padded row r + 1 is image row r; the pointers start at image column 0.
+    SobelProductsRow(buffers->padded.ptr<uchar>(r) + 1, buffers->padded.ptr<uchar>(r + 1) + 1,
+                     buffers->padded.ptr<uchar>(r + 2) + 1, cols, products, products + width,
+                     products + 2 * width);
+    int32_t* const slot = buffers->row_sums.data() + 3 * width * static_cast<size_t>(r % 3);
+    for (int channel = 0; channel < 3; ++channel)
+      SumsOfThreeRow(products + channel * width, cols, slot + channel * width);
+  };
+  // The column sums of three (rows reflected at both ends) and the response.
   const float scale = static_cast<float>(1.0 / (4.0 * 3.0 * 255.0));
   const float scale2 = scale * scale;
   const float kf = static_cast<float>(k);
   buffers->response.create(rows, cols, CV_32F);
+  const auto slot_of = [&](int r) {
+    return buffers->row_sums.data() + 3 * width * static_cast<size_t>(r % 3);
+  };
+  add_row(0);
+  add_row(1);
   for (int y = 0; y < rows; ++y) {
-    const size_t above = static_cast<size_t>(y > 0 ? y - 1 : 1) * cols;
-    const size_t here = static_cast<size_t>(y) * cols;
-    const size_t below = static_cast<size_t>(y + 1 < rows ? y + 1 : rows - 2) * cols;
-    const int32_t* xx = sums[0];
-    const int32_t* xy = sums[1];
-    const int32_t* yy = sums[2];
-    float* out = buffers->response.ptr<float>(y);
-    for (int x = 0; x < cols; ++x) {
-      const float a = static_cast<float>(xx[above + x] + xx[here + x] + xx[below + x]) * scale2;
-      const float b = static_cast<float>(xy[above + x] + xy[here + x] + xy[below + x]) * scale2;
-      const float c = static_cast<float>(yy[above + x] + yy[here + x] + yy[below + x]) * scale2;
-      out[x] = a * c - b * b - kf * (a + c) * (a + c);
-    }
+    if (y >= 1 && y + 1 < rows) add_row(y + 1);  // rows y − 1, y, y + 1 are now in the ring
+    ResponseRow(slot_of(y > 0 ? y - 1 : 1), slot_of(y), slot_of(y + 1 < rows ? y + 1 : rows - 2),
+                cols, width, scale2, kf, buffers->response.ptr<float>(y));
   }
+}
+
+// The threshold scan of DetectHarrisCorners goes by chunks of pixels: a chunk whose responses
+// are all below the threshold is skipped after one branch-free (vectorisable) test.
+constexpr int kScanChunk = 16;
+bool AllBelow(const float* __restrict values, float threshold) {
+  bool below = true;
+  for (int k = 0; k < kScanChunk; ++k) below &= values[k] < threshold;
+  return below;
 }
 
 // True when response(x, y) is the largest value of the (2 radius + 1)² window around it
@@ -300,14 +329,18 @@ std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOpt
   for (int y = y_begin; y < y_end; ++y) {
     const float* r = response.ptr<float>(y);
     const int row = std::min(options.grid_rows - 1, y * options.grid_rows / prepared.rows);
-    for (int x = x_begin; x < x_end; ++x) {
-      if (r[x] < threshold) continue;  // most pixels: a tight scan
-      if (!IsLocalMaximum(response, x, y, options.min_distance)) continue;
-      const int col = std::min(options.grid_cols - 1, x * options.grid_cols / prepared.cols);
-      const int cell = row * options.grid_cols + col;
-      candidates.push_back({Eigen::Vector2d(x, y), r[x]});
-      bucket_of.push_back(cell);
-      ++bucket_size[cell];
+    for (int x0 = x_begin; x0 < x_end; x0 += kScanChunk) {
+      const int x1 = std::min(x0 + kScanChunk, x_end);
+      if (x1 - x0 == kScanChunk && AllBelow(r + x0, threshold)) continue;  // most pixels
+      for (int x = x0; x < x1; ++x) {
+        if (r[x] < threshold) continue;
+        if (!IsLocalMaximum(response, x, y, options.min_distance)) continue;
+        const int col = std::min(options.grid_cols - 1, x * options.grid_cols / prepared.cols);
+        const int cell = row * options.grid_cols + col;
+        candidates.push_back({Eigen::Vector2d(x, y), r[x]});
+        bucket_of.push_back(cell);
+        ++bucket_size[cell];
+      }
     }
   }
 

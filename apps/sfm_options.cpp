@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <string>
 
 #include "calib/error.h"
 #include "sfm/harris.h"
@@ -52,6 +54,19 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "observations of map points (1: always the RANSAC)")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
+  const std::map<std::string, NoncentralHypotheses> hypotheses = {
+      {"gp3p", NoncentralHypotheses::kGp3p},
+      {"camera-p3p", NoncentralHypotheses::kCameraP3p},
+      {"rig-centre-p3p", NoncentralHypotheses::kRigCentreP3p}};
+  command
+      ->add_option("--resection-hypotheses", o->sfm.tracker.noncentral_resection_hypotheses,
+                   "Non-central mode: the resection's RANSAC hypotheses: gp3p (GP3P on any "
+                   "three correspondences), camera-p3p (the P3P of three correspondences of one "
+                   "camera, taken to the rig by its offset) or rig-centre-p3p (the P3P from the "
+                   "cameras' mean centre, an approximation); each scored and the best refined "
+                   "with the true offsets")
+      ->transform(CLI::CheckedTransformer(hypotheses, CLI::ignore_case))
+      ->option_text("TEXT=gp3p");
   command->add_flag("--resection-prior-after-search", o->sfm.tracker.resection_prior_after_search,
                     "After the map-point search, the frame's first pose is kept without the "
                     "RANSAC when it keeps at least its inliers");

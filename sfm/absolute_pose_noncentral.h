@@ -1,7 +1,8 @@
 #pragma once
 // Absolute pose (resection) of a non-central rig from bearing-to-point correspondences with the
-// rig's true cam_from_rig offsets: GP3P (Kneip, through OpenGV) in RANSAC, or the central P3P's
-// hypotheses scored with the offsets, refined on the inliers with the offsets.
+// rig's true cam_from_rig offsets: a RANSAC whose hypotheses come from GP3P (Kneip, through
+// OpenGV) or from the central P3P (NoncentralHypotheses), scored with the offsets, the best
+// refined on its inliers with the offsets.
 
 #include <Eigen/Core>
 #include <string>
@@ -13,13 +14,25 @@
 
 namespace omni {
 
+// How the resection's RANSAC makes its hypotheses. Every hypothesis is scored with the true
+// offsets, and the best one refined on its inliers with them and its inliers selected again.
+enum class NoncentralHypotheses {
+  // GP3P (the generalised P3P) on three correspondences from any cameras, with the offsets.
+  kGp3p,
+  // The central P3P of one camera: three correspondences drawn from the same camera give that
+  // camera's pose, taken to the rig's through the camera's own offset and rotation: exact for
+  // the rig (no approximation of the offsets), with a far cheaper solver than GP3P. A fourth
+  // correspondence, from any camera, picks among the P3P's solutions as with GP3P. When no
+  // camera has three correspondences, GP3P.
+  kCameraP3p,
+  // The central P3P on the bearings turned into the rig's axes, as seen from the cameras' mean
+  // centre: an approximation of the offsets (its hypotheses are off by the offsets' angle).
+  kRigCentreP3p,
+};
+
 struct NoncentralAbsolutePoseOptions {
   RansacOptions ransac;
-  // The RANSAC's hypotheses from the central P3P on the bearings turned into the rig's axes, as
-  // seen from the cameras' mean centre (a far cheaper minimal solver than GP3P), each scored
-  // with the true offsets; the best one refined on its inliers with the true offsets, and its
-  // inliers selected again. False: GP3P with the true offsets.
-  bool central_hypotheses = false;
+  NoncentralHypotheses hypotheses = NoncentralHypotheses::kGp3p;
 
   std::string Check() const {
     const std::string problem = ransac.Check();

@@ -628,7 +628,7 @@ Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservatio
   } else {
     NoncentralAbsolutePoseOptions absolute;
     absolute.ransac = ResectionRansac();
-    absolute.central_hypotheses = options.noncentral_resection_central_hypotheses;
+    absolute.hypotheses = options.noncentral_resection_hypotheses;
     r.ransac = EstimateNoncentralAbsolutePose(rig, r.bearings, r.cameras, r.positions, absolute,
                                               &r.world_from_rig,
                                               prior_world_from_rig != nullptr ? &prior : nullptr);

@@ -23,6 +23,7 @@
 
 #include "calib/pose.h"
 #include "calib/rig.h"
+#include "sfm/absolute_pose_noncentral.h"
 #include "sfm/bundle_adjustment.h"
 #include "sfm/keyframe_selection.h"
 #include "sfm/map_point_search.h"
@@ -94,10 +95,10 @@ struct TrackerOptions {
   // search: the frame's first resection, taken when it keeps at least its inliers.
   double resection_prior_share = 1.0;
   bool resection_prior_after_search = false;
-  // Non-central mode: the resection's RANSAC draws its hypotheses with the central P3P on the
-  // bearings seen from the cameras' mean centre, and scores and refines them with the true
-  // offsets (NoncentralAbsolutePoseOptions::central_hypotheses), instead of GP3P.
-  bool noncentral_resection_central_hypotheses = false;
+  // Non-central mode: how the resection's RANSAC makes its hypotheses (GP3P, the P3P of one
+  // camera, or the P3P from the cameras' mean centre), each scored and the best refined with the
+  // true offsets (NoncentralAbsolutePoseOptions::hypotheses).
+  NoncentralHypotheses noncentral_resection_hypotheses = NoncentralHypotheses::kGp3p;
   // Never a silently wrong map: a resected centre farther from the constant-velocity
   // prediction than max_jump_ratio times a step (the larger of the last step and the mean step
   // so far) times the frames since the last tracked one is rejected as a wrong pose.

@@ -83,6 +83,87 @@ TEST_P(AbsolutePoseTest, NoncentralGP3PRecoversRigPoseWithOutliers) {
   test::ExpectMaskMatchesTruth(result.inlier_mask, frame.is_outlier, 0.95);
 }
 
+TEST_P(AbsolutePoseTest, NoncentralCameraP3PRecoversRigPoseWithOutliers) {
+  // Offsets of 1 m: the hypotheses from one camera's P3P, taken to the rig by that camera's
+  // offset, give the rig's pose as GP3P does, and separate the outliers.
+  const Rig rig = MakeSyntheticRingRig(5, true, 1.0);
+  const SyntheticScene scene =
+      MakeSyntheticScene(rig, {kWorldFromRig0, kWorldFromRig1}, SceneOptions(GetParam()));
+  const FrameObservations frame = ObservationsOfFrame(scene, 1);
+  ASSERT_GT(frame.bearings.size(), 100u);
+
+  NoncentralAbsolutePoseOptions options;
+  options.ransac.seed = GetParam();
+  options.hypotheses = NoncentralHypotheses::kCameraP3p;
+  Rigid3d world_from_rig;
+  const RansacResult result = EstimateNoncentralAbsolutePose(
+      rig, frame.bearings, frame.cameras, frame.points, options, &world_from_rig);
+  ASSERT_TRUE(result.success);
+  EXPECT_LT(RotationAngleBetween(world_from_rig.rotation, kWorldFromRig1.rotation), 0.002);
+  EXPECT_LT((world_from_rig.translation - kWorldFromRig1.translation).norm(), 0.01);
+  test::ExpectMaskMatchesTruth(result.inlier_mask, frame.is_outlier, 0.95);
+}
+
+TEST_P(AbsolutePoseTest, NoncentralCameraP3PHypothesesAreExactWhereTheRigCentreP3PIsNot) {
+  // Exact bearings, no outliers, no refinement, the fewest iterations: the first hypotheses are
+  // the estimate. One camera's P3P taken to the rig is the rig's pose to the solver's rounding
+  // (a sample mixing cameras would not be); the P3P from the cameras' mean centre is off by the
+  // 1 m offsets' angles.
+  const Rig rig = MakeSyntheticRingRig(5, true, 1.0);
+  SyntheticSceneOptions scene_options = SceneOptions(GetParam());
+  scene_options.noise = 0.0;
+  scene_options.outlier_ratio = 0.0;
+  const SyntheticScene scene =
+      MakeSyntheticScene(rig, {kWorldFromRig0, kWorldFromRig1}, scene_options);
+  const FrameObservations frame = ObservationsOfFrame(scene, 1);
+  ASSERT_GT(frame.bearings.size(), 100u);
+
+  NoncentralAbsolutePoseOptions options;
+  options.ransac.seed = GetParam();
+  options.ransac.refine = false;
+  options.ransac.max_iterations = 1;
+  options.hypotheses = NoncentralHypotheses::kCameraP3p;
+  Rigid3d camera_p3p, rig_centre_p3p;
+  ASSERT_TRUE(EstimateNoncentralAbsolutePose(rig, frame.bearings, frame.cameras, frame.points,
+                                             options, &camera_p3p)
+                  .success);
+  EXPECT_LT(RotationAngleBetween(camera_p3p.rotation, kWorldFromRig1.rotation), 1e-6);
+  EXPECT_LT((camera_p3p.translation - kWorldFromRig1.translation).norm(), 1e-6);
+  options.hypotheses = NoncentralHypotheses::kRigCentreP3p;
+  EstimateNoncentralAbsolutePose(rig, frame.bearings, frame.cameras, frame.points, options,
+                                 &rig_centre_p3p);
+  EXPECT_GT((rig_centre_p3p.translation - kWorldFromRig1.translation).norm(), 1e-3);
+}
+
+TEST(AbsolutePose, NoncentralCameraP3PFallsBackToGP3PWhenNoCameraHasThreeCorrespondences) {
+  // Two correspondences per camera: no camera's P3P can be drawn, GP3P poses the rig.
+  const Rig rig = MakeSyntheticRingRig(5, true, 0.3);
+  SyntheticSceneOptions scene_options = SceneOptions(1);
+  scene_options.outlier_ratio = 0.0;
+  const SyntheticScene scene =
+      MakeSyntheticScene(rig, {kWorldFromRig0, kWorldFromRig1}, scene_options);
+  const FrameObservations all = ObservationsOfFrame(scene, 1);
+  FrameObservations frame;
+  std::vector<int> per_camera(rig.cameras.size(), 0);
+  for (size_t i = 0; i < all.bearings.size(); ++i) {
+    if (per_camera[all.cameras[i]]++ >= 2) continue;
+    frame.bearings.push_back(all.bearings[i]);
+    frame.points.push_back(all.points[i]);
+    frame.cameras.push_back(all.cameras[i]);
+  }
+  ASSERT_EQ(frame.bearings.size(), 2 * rig.cameras.size());
+
+  NoncentralAbsolutePoseOptions options;
+  options.hypotheses = NoncentralHypotheses::kCameraP3p;
+  Rigid3d world_from_rig;
+  const RansacResult result = EstimateNoncentralAbsolutePose(
+      rig, frame.bearings, frame.cameras, frame.points, options, &world_from_rig);
+  ASSERT_TRUE(result.success);
+  EXPECT_EQ(result.num_inliers, static_cast<int>(frame.bearings.size()));
+  EXPECT_LT(RotationAngleBetween(world_from_rig.rotation, kWorldFromRig1.rotation), 0.002);
+  EXPECT_LT((world_from_rig.translation - kWorldFromRig1.translation).norm(), 0.01);
+}
+
 TEST_P(AbsolutePoseTest, NoncentralFromCentralHypothesesRecoversRigPoseWithOutliers) {
   // Offsets of 5 cm, points 3 to 12 m away: the central P3P's hypotheses, scored and refined
   // with the true offsets, give the rig's pose (the central approximation alone is off by
@@ -98,7 +179,7 @@ TEST_P(AbsolutePoseTest, NoncentralFromCentralHypothesesRecoversRigPoseWithOutli
 
   NoncentralAbsolutePoseOptions options;
   options.ransac.seed = GetParam();
-  options.central_hypotheses = true;
+  options.hypotheses = NoncentralHypotheses::kRigCentreP3p;
   Rigid3d world_from_rig;
   const RansacResult result = EstimateNoncentralAbsolutePose(
       rig, frame.bearings, frame.cameras, frame.points, options, &world_from_rig);

@@ -44,6 +44,30 @@ SyntheticSceneOptions SceneOptions(uint32_t seed) {
   return options;
 }
 
+// The non-central resection with `hypotheses` on frame 1 of a scene seen by a ring of five
+// cameras `offset` metres from the rig's centre: the rig's pose within `max_angle` radians and
+// `max_distance` metres, the outliers told apart.
+void ExpectNoncentralRecoversRigPose(double offset, const SyntheticSceneOptions& scene_options,
+                                     NoncentralHypotheses hypotheses, double max_angle,
+                                     double max_distance) {
+  const Rig rig = MakeSyntheticRingRig(5, true, offset);
+  const SyntheticScene scene =
+      MakeSyntheticScene(rig, {kWorldFromRig0, kWorldFromRig1}, scene_options);
+  const FrameObservations frame = ObservationsOfFrame(scene, 1);
+  ASSERT_GT(frame.bearings.size(), 100u);
+
+  NoncentralAbsolutePoseOptions options;
+  options.ransac.seed = scene_options.seed;
+  options.hypotheses = hypotheses;
+  Rigid3d world_from_rig;
+  const RansacResult result = EstimateNoncentralAbsolutePose(
+      rig, frame.bearings, frame.cameras, frame.points, options, &world_from_rig);
+  ASSERT_TRUE(result.success);
+  EXPECT_LT(RotationAngleBetween(world_from_rig.rotation, kWorldFromRig1.rotation), max_angle);
+  EXPECT_LT((world_from_rig.translation - kWorldFromRig1.translation).norm(), max_distance);
+  test::ExpectMaskMatchesTruth(result.inlier_mask, frame.is_outlier, 0.95);
+}
+
 class AbsolutePoseTest : public ::testing::TestWithParam<uint32_t> {};
 
 TEST_P(AbsolutePoseTest, CentralP3PRecoversCameraPoseWithOutliers) {
@@ -66,42 +90,15 @@ TEST_P(AbsolutePoseTest, CentralP3PRecoversCameraPoseWithOutliers) {
 }
 
 TEST_P(AbsolutePoseTest, NoncentralGP3PRecoversRigPoseWithOutliers) {
-  const Rig rig = MakeSyntheticRingRig(5, true, 0.3);
-  const SyntheticScene scene =
-      MakeSyntheticScene(rig, {kWorldFromRig0, kWorldFromRig1}, SceneOptions(GetParam()));
-  const FrameObservations frame = ObservationsOfFrame(scene, 1);
-  ASSERT_GT(frame.bearings.size(), 100u);
-
-  NoncentralAbsolutePoseOptions options;
-  options.ransac.seed = GetParam();
-  Rigid3d world_from_rig;
-  const RansacResult result = EstimateNoncentralAbsolutePose(
-      rig, frame.bearings, frame.cameras, frame.points, options, &world_from_rig);
-  ASSERT_TRUE(result.success);
-  EXPECT_LT(RotationAngleBetween(world_from_rig.rotation, kWorldFromRig1.rotation), 0.002);
-  EXPECT_LT((world_from_rig.translation - kWorldFromRig1.translation).norm(), 0.01);
-  test::ExpectMaskMatchesTruth(result.inlier_mask, frame.is_outlier, 0.95);
+  ExpectNoncentralRecoversRigPose(0.3, SceneOptions(GetParam()), NoncentralHypotheses::kGp3p, 0.002,
+                                  0.01);
 }
 
 TEST_P(AbsolutePoseTest, NoncentralCameraP3PRecoversRigPoseWithOutliers) {
   // Offsets of 1 m: the hypotheses from one camera's P3P, taken to the rig by that camera's
   // offset, give the rig's pose as GP3P does, and separate the outliers.
-  const Rig rig = MakeSyntheticRingRig(5, true, 1.0);
-  const SyntheticScene scene =
-      MakeSyntheticScene(rig, {kWorldFromRig0, kWorldFromRig1}, SceneOptions(GetParam()));
-  const FrameObservations frame = ObservationsOfFrame(scene, 1);
-  ASSERT_GT(frame.bearings.size(), 100u);
-
-  NoncentralAbsolutePoseOptions options;
-  options.ransac.seed = GetParam();
-  options.hypotheses = NoncentralHypotheses::kCameraP3p;
-  Rigid3d world_from_rig;
-  const RansacResult result = EstimateNoncentralAbsolutePose(
-      rig, frame.bearings, frame.cameras, frame.points, options, &world_from_rig);
-  ASSERT_TRUE(result.success);
-  EXPECT_LT(RotationAngleBetween(world_from_rig.rotation, kWorldFromRig1.rotation), 0.002);
-  EXPECT_LT((world_from_rig.translation - kWorldFromRig1.translation).norm(), 0.01);
-  test::ExpectMaskMatchesTruth(result.inlier_mask, frame.is_outlier, 0.95);
+  ExpectNoncentralRecoversRigPose(1.0, SceneOptions(GetParam()), NoncentralHypotheses::kCameraP3p,
+                                  0.002, 0.01);
 }
 
 TEST_P(AbsolutePoseTest, NoncentralCameraP3PHypothesesAreExactWhereTheRigCentreP3PIsNot) {
@@ -168,25 +165,11 @@ TEST_P(AbsolutePoseTest, NoncentralFromCentralHypothesesRecoversRigPoseWithOutli
   // Offsets of 5 cm, points 3 to 12 m away: the central P3P's hypotheses, scored and refined
   // with the true offsets, give the rig's pose (the central approximation alone is off by
   // centimetres: the translation is checked to 5 mm) and separate the outliers.
-  const Rig rig = MakeSyntheticRingRig(5, true, 0.05);
   SyntheticSceneOptions scene_options = SceneOptions(GetParam());
   scene_options.min_depth = 3.0;
   scene_options.max_depth = 12.0;
-  const SyntheticScene scene =
-      MakeSyntheticScene(rig, {kWorldFromRig0, kWorldFromRig1}, scene_options);
-  const FrameObservations frame = ObservationsOfFrame(scene, 1);
-  ASSERT_GT(frame.bearings.size(), 100u);
-
-  NoncentralAbsolutePoseOptions options;
-  options.ransac.seed = GetParam();
-  options.hypotheses = NoncentralHypotheses::kRigCentreP3p;
-  Rigid3d world_from_rig;
-  const RansacResult result = EstimateNoncentralAbsolutePose(
-      rig, frame.bearings, frame.cameras, frame.points, options, &world_from_rig);
-  ASSERT_TRUE(result.success);
-  EXPECT_LT(RotationAngleBetween(world_from_rig.rotation, kWorldFromRig1.rotation), 0.001);
-  EXPECT_LT((world_from_rig.translation - kWorldFromRig1.translation).norm(), 0.005);
-  test::ExpectMaskMatchesTruth(result.inlier_mask, frame.is_outlier, 0.95);
+  ExpectNoncentralRecoversRigPose(0.05, scene_options, NoncentralHypotheses::kRigCentreP3p, 0.001,
+                                  0.005);
 }
 
 TEST_P(AbsolutePoseTest, NoncentralGP3PNeedsTheTrueOffsets) {

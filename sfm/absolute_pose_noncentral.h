@@ -20,8 +20,8 @@ enum class NoncentralHypotheses {
   // GP3P (the generalised P3P) on three correspondences from any cameras, with the offsets.
   kGp3p,
   // The central P3P of one camera: three correspondences drawn from the same camera give that
-  // camera's pose, taken to the rig's through the camera's own offset and rotation: exact for
-  // the rig (no approximation of the offsets), with a far cheaper solver than GP3P. A fourth
+  // camera's pose, taken to the rig's pose through the camera's own offset and rotation: exact
+  // for the rig (no approximation of the offsets), with a far cheaper solver than GP3P. A fourth
   // correspondence, from any camera, picks among the P3P's solutions as with GP3P. When no
   // camera has three correspondences, GP3P.
   kCameraP3p,

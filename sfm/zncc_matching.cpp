@@ -146,6 +146,20 @@ MatchBuffers& ThreadBuffers() {
 
 }  // namespace
 
+namespace {
+
+// One row of a window interpolated along x: h[c] = p[c] + a (p[c + 1] − p[c]) for c < size.
+// Restricted pointers: the row of bytes could otherwise alias the floats as far as the compiler
+// knows, which kept the loop scalar.
+void InterpolateRowAlongX(const uchar* __restrict p, int size, float a, float* __restrict h) {
+  for (int c = 0; c < size; ++c) {
+    const float left = p[c], right = p[c + 1];
+    h[c] = left + a * (right - left);
+  }
+}
+
+}  // namespace
+
 bool NormalisedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int half_window,
                       float* values) {
   const double margin = half_window + 1.0;
@@ -162,16 +176,9 @@ bool NormalisedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int ha
   // per sample instead of four, and each pixel converted once).
   thread_local std::vector<float> rows;
   rows.resize(static_cast<size_t>(size + 1) * size);
-  for (int r = 0; r <= size; ++r) {
-    const uchar* p = image.ptr<uchar>(iy + r) + ix;
-    float* h = rows.data() + static_cast<size_t>(r) * size;
-    float left = p[0];
-    for (int c = 0; c < size; ++c) {
-      const float right = p[c + 1];
-      h[c] = left + a * (right - left);
-      left = right;
-    }
-  }
+  for (int r = 0; r <= size; ++r)
+    InterpolateRowAlongX(image.ptr<uchar>(iy + r) + ix, size, a,
+                         rows.data() + static_cast<size_t>(r) * size);
   const int area = size * size;
   // Sums of the samples less the first pixel's value (small in a window of low contrast, where
   // the rounding of the squares would matter).

@@ -54,6 +54,45 @@ inline int Paeth(int left, int above, int above_left) {
   return pa <= pb && pa <= pc ? left : above_or_corner;
 }
 
+// Undoes the Paeth filter of one row (one byte per pixel) with a row above.
+void UnfilterPaethRow(const unsigned char* in, const unsigned char* up, int width,
+                      unsigned char* out) {
+  int left = 0, above_left = 0;
+  for (int x = 0; x < width; ++x) {
+    const int above = up[x];
+    out[x] = static_cast<unsigned char>(in[x] + Paeth(left, above, above_left));
+    left = out[x];
+    above_left = above;
+  }
+}
+
+// Undoes the Paeth filter of two consecutive rows (in0 below `up`, in1 below in0) at once: the
+// second row one pixel behind the first, whose pixels it takes as its row above, so that the
+// two serial chains through the left neighbour run side by side. The same bytes as two calls of
+// UnfilterPaethRow.
+void UnfilterPaethRowPair(const unsigned char* in0, const unsigned char* in1,
+                          const unsigned char* up, int width, unsigned char* out0,
+                          unsigned char* out1) {
+  int left0 = 0, above_left0 = 0, left1 = 0, above_left1 = 0;
+  for (int x = 0; x < width; ++x) {
+    const int above0 = up[x];
+    const int decoded0 = static_cast<unsigned char>(in0[x] + Paeth(left0, above0, above_left0));
+    out0[x] = static_cast<unsigned char>(decoded0);
+    if (x > 0) {  // row 1 at x − 1: its pixel above is row 0's at x − 1, left0 before this x
+      const int above1 = left0;
+      const int decoded1 =
+          static_cast<unsigned char>(in1[x - 1] + Paeth(left1, above1, above_left1));
+      out1[x - 1] = static_cast<unsigned char>(decoded1);
+      left1 = decoded1;
+      above_left1 = above1;
+    }
+    left0 = decoded0;
+    above_left0 = above0;
+  }
+  const int above1 = left0;  // the last pixel of row 1
+  out1[width - 1] = static_cast<unsigned char>(in1[width - 1] + Paeth(left1, above1, above_left1));
+}
+
 // Undoes the filter of each row (one byte per pixel): rows of 1 + width bytes, the first the
 // filter type. False on an unknown filter type.
 bool Unfilter(const unsigned char* filtered, int width, int height, cv::Mat* image) {
@@ -92,12 +131,12 @@ bool Unfilter(const unsigned char* filtered, int width, int height, cv::Mat* ima
           for (int x = 0; x < width; ++x) out[x] = left = static_cast<unsigned char>(in[x] + left);
           break;
         }
-        int left = 0, above_left = 0;
-        for (int x = 0; x < width; ++x) {
-          const int above = up[x];
-          out[x] = static_cast<unsigned char>(in[x] + Paeth(left, above, above_left));
-          left = out[x];
-          above_left = above;
+        const unsigned char* next = in + width;  // the filter type of row y + 1
+        if (y + 1 < height && *next == 4) {      // two Paeth rows: decoded side by side
+          UnfilterPaethRowPair(in, next + 1, up, width, out, image->ptr<unsigned char>(y + 1));
+          ++y;
+        } else {
+          UnfilterPaethRow(in, up, width, out);
         }
         break;
       }

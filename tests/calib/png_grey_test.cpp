@@ -117,9 +117,12 @@ double MaxDifference(const cv::Mat& a, const cv::Mat& b) {
 
 TEST(CalibPlainGreyPng, EachRowFilterDecodesToTheImageAndToOpenCvsPixels) {
   const cv::Mat image = TestImage(37, 23);
-  for (int filter = 0; filter <= 5; ++filter) {  // 5: row y uses filter y mod 5
-    const std::string png =
-        MakePng(image, [filter](int y) { return filter == 5 ? y % 5 : filter; });
+  // 5: row y uses filter y mod 5; 6: pairs of Paeth rows between Sub rows, then a single one
+  // (the decoder takes two consecutive Paeth rows side by side).
+  for (int filter = 0; filter <= 6; ++filter) {
+    const std::string png = MakePng(image, [filter](int y) {
+      return filter == 5 ? y % 5 : filter == 6 ? (y % 3 == 0 ? 1 : 4) : filter;
+    });
     cv::Mat decoded;
     ASSERT_TRUE(DecodePlainGreyPng(png, &decoded)) << "filter " << filter;
     EXPECT_EQ(decoded.type(), CV_8UC1);

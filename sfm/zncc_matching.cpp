@@ -144,10 +144,6 @@ MatchBuffers& ThreadBuffers() {
   return buffers;
 }
 
-}  // namespace
-
-namespace {
-
 // One row of a window interpolated along x: h[c] = p[c] + a (p[c + 1] − p[c]) for c < size.
 // Restricted pointers: the row of bytes could otherwise alias the floats as far as the compiler
 // knows, which kept the loop scalar.

@@ -76,13 +76,14 @@ void UnfilterPaethRowPair(const unsigned char* in0, const unsigned char* in1,
   int left0 = 0, above_left0 = 0, left1 = 0, above_left1 = 0;
   for (int x = 0; x < width; ++x) {
     const int above0 = up[x];
-    const int decoded0 = static_cast<unsigned char>(in0[x] + Paeth(left0, above0, above_left0));
-    out0[x] = static_cast<unsigned char>(decoded0);
+    const unsigned char decoded0 =
+        static_cast<unsigned char>(in0[x] + Paeth(left0, above0, above_left0));
+    out0[x] = decoded0;
     if (x > 0) {  // row 1 at x − 1: its pixel above is row 0's at x − 1, left0 before this x
       const int above1 = left0;
-      const int decoded1 =
+      const unsigned char decoded1 =
           static_cast<unsigned char>(in1[x - 1] + Paeth(left1, above1, above_left1));
-      out1[x - 1] = static_cast<unsigned char>(decoded1);
+      out1[x - 1] = decoded1;
       left1 = decoded1;
       above_left1 = above1;
     }

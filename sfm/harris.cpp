@@ -147,13 +147,16 @@ void HarrisResponse3x3(const cv::Mat& image, double k, HarrisBuffers* buffers) {
   buffers->products.resize(3 * width);
   buffers->row_sums.resize(9 * width);  // ring slot r % 3, channel c: (3 (r % 3) + c) · cols
   int32_t* const products = buffers->products.data();
+  const auto slot_of = [&](int r) {
+    return buffers->row_sums.data() + 3 * width * static_cast<size_t>(r % 3);
+  };
   // Row r's products, then their sums of three along the row, into its ring slot.
   const auto add_row = [&](int r) {
     // Padded row r + 1 is image row r; the pointers start at image column 0.
     SobelProductsRow(buffers->padded.ptr<uchar>(r) + 1, buffers->padded.ptr<uchar>(r + 1) + 1,
                      buffers->padded.ptr<uchar>(r + 2) + 1, cols, products, products + width,
                      products + 2 * width);
-    int32_t* const slot = buffers->row_sums.data() + 3 * width * static_cast<size_t>(r % 3);
+    int32_t* const slot = slot_of(r);
     for (int channel = 0; channel < 3; ++channel)
       SumsOfThreeRow(products + channel * width, cols, slot + channel * width);
   };
@@ -162,9 +165,6 @@ void HarrisResponse3x3(const cv::Mat& image, double k, HarrisBuffers* buffers) {
   const float scale2 = scale * scale;
   const float kf = static_cast<float>(k);
   buffers->response.create(rows, cols, CV_32F);
-  const auto slot_of = [&](int r) {
-    return buffers->row_sums.data() + 3 * width * static_cast<size_t>(r % 3);
-  };
   add_row(0);
   add_row(1);
   for (int y = 0; y < rows; ++y) {

@@ -67,6 +67,12 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "with the true offsets")
       ->transform(CLI::CheckedTransformer(hypotheses, CLI::ignore_case))
       ->option_text("TEXT=gp3p");
+  command
+      ->add_option("--resection-consensus", o->sfm.tracker.resection_consensus_angle_factor,
+                   "The resection's RANSAC counts and refines on the correspondences within this "
+                   "times its angle, then keeps as inliers those within the angle (1: one angle "
+                   "for all; default 0: 3 in non-central mode, 1 in central mode)")
+      ->capture_default_str();
   command->add_flag("--resection-prior-after-search", o->sfm.tracker.resection_prior_after_search,
                     "After the map-point search, the frame's first pose is kept without the "
                     "RANSAC when it keeps at least its inliers");
@@ -139,6 +145,9 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
                      "expected 0 (from the image size) or a factor of 1 or more");
   o->sfm.tracker.central = o->central ? true : o->non_central ? false : rig.central;
   if (o->corners < 0) throw InputError("", "--corners", "expected 0 (from the rig) or a count");
+  const double consensus = o->sfm.tracker.resection_consensus_angle_factor;
+  if (consensus != 0.0 && !(consensus >= 1.0 && consensus <= 100.0))
+    throw InputError("", "--resection-consensus", "expected 0 (from the mode) or 1 to 100");
   if (o->continuation_pool != 0.0) {
     if (!(o->continuation_pool >= 1.0 && o->continuation_pool <= 10.0))
       throw InputError("", "--continuation-pool",

@@ -24,7 +24,9 @@ RansacResult EstimateCentralAbsolutePose(const std::vector<Eigen::Vector3d>& bea
   const internal::AbsolutePoseScorer scorer(bearings, points_in_world);
   const RansacResult result = internal::RunAbsolutePoseRansac(
       problem, scorer, internal::AngleToOpengvScore(options.ransac.max_angle_error), options.ransac,
-      &model, prior);
+      &model, prior, nullptr,
+      internal::AngleToOpengvScore(options.consensus_angle_factor *
+                                   options.ransac.max_angle_error));
   if (result.success) *world_from_cam = internal::FromOpengvTransformation(model);
   return result;
 }

@@ -87,6 +87,8 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
   const internal::AbsolutePoseScorer scorer(bearings, points_in_world, &cameras, &cam_rotations,
                                             &cam_offsets);
   const double threshold = internal::AngleToOpengvScore(options.ransac.max_angle_error);
+  const double consensus_threshold =
+      internal::AngleToOpengvScore(options.consensus_angle_factor * options.ransac.max_angle_error);
   RansacResult result;
   if (options.hypotheses == NoncentralHypotheses::kRigCentreP3p) {
     // The bearings in the rig's axes, from the mean camera centre.
@@ -98,7 +100,7 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
     opengv::absolute_pose::CentralAbsoluteAdapter adapter(rig_bearings, points);
     auto problem = std::make_shared<Problem>(adapter, Problem::KNEIP, /*randomSeed=*/false);
     result = internal::RunAbsolutePoseRansac(problem, scorer, threshold, options.ransac, &model,
-                                             prior, &centre);
+                                             prior, &centre, consensus_threshold);
   } else {
     opengv::absolute_pose::NoncentralAbsoluteAdapter adapter(f, cameras, points, cam_offsets,
                                                              cam_rotations);
@@ -108,8 +110,8 @@ RansacResult EstimateNoncentralAbsolutePose(const Rig& rig,
       if (camera_problem->CanSample()) problem = camera_problem;
     }
     if (!problem) problem = std::make_shared<Problem>(adapter, Problem::GP3P, /*randomSeed=*/false);
-    result =
-        internal::RunAbsolutePoseRansac(problem, scorer, threshold, options.ransac, &model, prior);
+    result = internal::RunAbsolutePoseRansac(problem, scorer, threshold, options.ransac, &model,
+                                             prior, nullptr, consensus_threshold);
   }
   if (result.success) *world_from_rig = internal::FromOpengvTransformation(model);
   return result;

@@ -32,9 +32,18 @@ enum class NoncentralHypotheses {
 
 struct NoncentralAbsolutePoseOptions {
   RansacOptions ransac;
+  // The hypotheses are scored, and the adaptive stopping counts their inliers, within
+  // ransac.max_angle_error times this; the best is refined on the correspondences within that
+  // angle, then the inliers (the result's mask and count) are those within max_angle_error of it
+  // refined on them. Map points a pixel or two off are right but outside a sub-pixel
+  // max_angle_error: counted, they let far fewer samples find the pose, and the refinement uses
+  // them. 1: one angle for all (OpenGV's RANSAC). docs/design.md §9.
+  double consensus_angle_factor = 1.0;
   NoncentralHypotheses hypotheses = NoncentralHypotheses::kGp3p;
 
   std::string Check() const {
+    if (!(consensus_angle_factor >= 1.0 && consensus_angle_factor <= 100.0))
+      return "consensus_angle_factor: expected 1 to 100";
     const std::string problem = ransac.Check();
     return problem.empty() ? problem : "ransac." + problem;
   }

@@ -16,7 +16,11 @@
 //  - the best model is refined on its inliers by Levenberg-Marquardt on the analytic Jacobian
 //    of the cost that OpenGV's refinement minimises with numerical derivatives (the sum of the
 //    squared scores), to the same minimum in a fraction of the time; the refined model is kept
-//    when it has at least as many inliers, as before.
+//    when it has at least as many inliers, as before;
+//  - optionally (a consensus threshold above the threshold) the hypotheses are scored, and the
+//    adaptive stopping counts, within the consensus threshold, and the best one is refined on
+//    the correspondences within it before the inliers are selected (and refined on) within the
+//    threshold. With the consensus threshold equal to the threshold, OpenGV's estimate.
 
 #include <tbb/parallel_for.h>
 
@@ -222,16 +226,24 @@ constexpr int kMaxHypothesisBatch = 16;
 
 using AbsolutePoseProblem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
 
+// Refinements of the best model on the correspondences within the consensus threshold, each
+// kept while it keeps at least as many of them.
+constexpr int kConsensusRefinements = 2;
+
 // `hypothesis_centre`: when given, the problem's hypotheses are poses of a frame with the rig's
 // axes at this point of the rig (a central solver on bearings from one centre), taken to
 // world_from_rig before they are scored; the scorer, the refinement and the model are the
-// rig's.
+// rig's. `consensus_threshold`: the score within which hypotheses are counted (see above); one
+// at or below `threshold` (e.g. 0) counts within the threshold itself.
 inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProblem>& problem,
                                           const AbsolutePoseScorer& scorer, double threshold,
                                           const RansacOptions& options,
                                           opengv::transformation_t* model,
                                           const PosePrior* prior = nullptr,
-                                          const Eigen::Vector3d* hypothesis_centre = nullptr) {
+                                          const Eigen::Vector3d* hypothesis_centre = nullptr,
+                                          double consensus_threshold = 0.0) {
+  const bool wider_consensus = consensus_threshold > threshold;
+  const double count_threshold = wider_consensus ? consensus_threshold : threshold;
   RansacResult result;
   const size_t num_correspondences = scorer.size();
   result.inlier_mask.assign(num_correspondences, 0);
@@ -281,15 +293,15 @@ inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProb
       if (samples[drawn].empty()) break;  // the sequential loop stops at this sample
     }
     const int bound = best_count;
-    tbb::parallel_for(tbb::blocked_range<int>(0, drawn, 1),
-                      [&](const tbb::blocked_range<int>& range) {
-                        for (int j = range.begin(); j != range.end(); ++j) {
-                          solved[j] = problem->computeModelCoefficients(samples[j], models[j]);
-                          if (solved[j] && hypothesis_centre != nullptr)
-                            models[j].col(3) -= models[j].block<3, 3>(0, 0) * *hypothesis_centre;
-                          counts[j] = solved[j] ? scorer.Count(models[j], threshold, bound) : 0;
-                        }
-                      });
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, drawn, 1), [&](const tbb::blocked_range<int>& range) {
+          for (int j = range.begin(); j != range.end(); ++j) {
+            solved[j] = problem->computeModelCoefficients(samples[j], models[j]);
+            if (solved[j] && hypothesis_centre != nullptr)
+              models[j].col(3) -= models[j].block<3, 3>(0, 0) * *hypothesis_centre;
+            counts[j] = solved[j] ? scorer.Count(models[j], count_threshold, bound) : 0;
+          }
+        });
     // Accepted in drawing order, exactly as one sample at a time.
     for (int j = 0; j < batch; ++j) {
       if (!(iterations < k && skipped < max_skip)) break;
@@ -321,6 +333,12 @@ inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProb
   if (!have_model) return result;
 
   std::vector<int> inliers;
+  if (wider_consensus && options.refine) {
+    scorer.Select(best_model, consensus_threshold, &inliers);
+    for (int round = 0; round < kConsensusRefinements; ++round) {
+      if (!RefineOnInliers(scorer, consensus_threshold, sample_size, &best_model, &inliers)) break;
+    }
+  }
   scorer.Select(best_model, threshold, &inliers);
   if (options.refine) RefineOnInliers(scorer, threshold, sample_size, &best_model, &inliers);
   result.num_iterations = iterations;

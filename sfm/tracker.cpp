@@ -84,6 +84,9 @@ std::string TrackerOptions::Check() const {
   if (!(stereo_min_ray_angle > 0.0))
     return "stereo_min_ray_angle: expected a positive angle (radians)";
   if (min_resection_inliers < 4) return "min_resection_inliers: expected at least 4";
+  if (resection_consensus_angle_factor != 0.0 &&
+      !(resection_consensus_angle_factor >= 1.0 && resection_consensus_angle_factor <= 100.0))
+    return "resection_consensus_angle_factor: expected 0 (by mode) or 1 to 100";
   if (min_consistent_inliers != 0 &&
       (min_consistent_inliers < 6 || min_consistent_inliers > min_resection_inliers))
     return "min_consistent_inliers: expected 0 or in [6, min_resection_inliers]";
@@ -619,6 +622,7 @@ Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservatio
   if (options.central) {
     CentralAbsolutePoseOptions absolute;
     absolute.ransac = ResectionRansac();
+    absolute.consensus_angle_factor = options.ResectionConsensusAngleFactor();
     // The central frame sits at central_center in the rig frame.
     prior.pose.translation += prior.pose.rotation * central_center;
     Rigid3d world_from_central;
@@ -629,6 +633,7 @@ Tracker::Impl::Resection Tracker::Impl::Resect(const std::vector<TrackObservatio
     NoncentralAbsolutePoseOptions absolute;
     absolute.ransac = ResectionRansac();
     absolute.hypotheses = options.noncentral_resection_hypotheses;
+    absolute.consensus_angle_factor = options.ResectionConsensusAngleFactor();
     r.ransac = EstimateNoncentralAbsolutePose(rig, r.bearings, r.cameras, r.positions, absolute,
                                               &r.world_from_rig,
                                               prior_world_from_rig != nullptr ? &prior : nullptr);

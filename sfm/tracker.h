@@ -99,6 +99,22 @@ struct TrackerOptions {
   // camera, or the P3P from the cameras' mean centre), each scored and the best refined with the
   // true offsets (NoncentralAbsolutePoseOptions::hypotheses).
   NoncentralHypotheses noncentral_resection_hypotheses = NoncentralHypotheses::kGp3p;
+  // The resection's RANSAC counts its hypotheses' inliers within resection_ransac.max_angle_error
+  // times this and refines the best on them, then keeps as the frame's inliers those within
+  // max_angle_error (Central/NoncentralAbsolutePoseOptions::consensus_angle_factor). 1: one
+  // angle for all; 0: by mode, ResectionConsensusAngleFactor(). The map points are a pixel or two
+  // off, more than the sub-pixel max_angle_error, which kept half of them out of the count: in
+  // non-central mode a consensus three times as wide needs a tenth of the samples (demo: 165 a
+  // resection, 16) and the refinement on them brings the keyframes closer to the truth (0.84
+  // times the ATE over 8 drives and 3 seeds); in central mode the approximation bends the rays
+  // by several times the angle, and the wider consensus takes them in (1.08 times the ATE):
+  // one angle there (docs/figures.md F52).
+  double resection_consensus_angle_factor = 0.0;
+  static constexpr double kNoncentralResectionConsensus = 3.0;
+  double ResectionConsensusAngleFactor() const {
+    if (resection_consensus_angle_factor > 0.0) return resection_consensus_angle_factor;
+    return central ? 1.0 : kNoncentralResectionConsensus;
+  }
   // Never a silently wrong map: a resected centre farther from the constant-velocity
   // prediction than max_jump_ratio times a step (the larger of the last step and the mean step
   // so far) times the frames since the last tracked one is rejected as a wrong pose.

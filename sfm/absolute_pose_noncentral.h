@@ -32,12 +32,7 @@ enum class NoncentralHypotheses {
 
 struct NoncentralAbsolutePoseOptions {
   RansacOptions ransac;
-  // The hypotheses are scored, and the adaptive stopping counts their inliers, within
-  // ransac.max_angle_error times this; the best is refined on the correspondences within that
-  // angle, then the inliers (the result's mask and count) are those within max_angle_error of it
-  // refined on them. Map points a pixel or two off are right but outside a sub-pixel
-  // max_angle_error: counted, they let far fewer samples find the pose, and the refinement uses
-  // them. 1: one angle for all (OpenGV's RANSAC). docs/design.md §9.
+  // As CentralAbsolutePoseOptions::consensus_angle_factor (1: OpenGV's RANSAC).
   double consensus_angle_factor = 1.0;
   NoncentralHypotheses hypotheses = NoncentralHypotheses::kGp3p;
 

@@ -256,6 +256,13 @@ TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
   EXPECT_EQ(hypotheses.exit_code, 2);
   EXPECT_EQ(testing::SplitText(hypotheses.err).size(), 1u) << hypotheses.err;
   EXPECT_FALSE(fs::exists(dir_->path() / "z"));
+  const testing::CommandResult consensus =
+      Run({"sfm", drive_.string(), "--out", (dir_->path() / "c").string(), "--resection-consensus",
+           "0.5"});
+  EXPECT_EQ(consensus.exit_code, 2);
+  EXPECT_EQ(testing::SplitText(consensus.err).size(), 1u) << consensus.err;
+  EXPECT_NE(consensus.err.find("--resection-consensus"), std::string::npos) << consensus.err;
+  EXPECT_FALSE(fs::exists(dir_->path() / "c"));
   const testing::CommandResult missing = Run(
       {"sfm", (dir_->path() / "no_such_drive").string(), "--out", (dir_->path() / "y").string()});
   EXPECT_EQ(missing.exit_code, 2);

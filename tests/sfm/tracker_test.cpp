@@ -916,3 +916,27 @@ TEST(TrackerGlobalAdjustment, ATailAdjustmentMovesOnlyTheKeyframesFromTheFirstFr
 
 }  // namespace
 }  // namespace omni
+
+namespace omni {
+namespace {
+
+// The resection's consensus: 0 picks by mode (three times the angle in non-central mode, one
+// angle in central mode, figures.md F52), an explicit factor applies in either mode, and a
+// factor below 1 (a consensus narrower than the inliers) or NaN is refused.
+TEST(TrackerOptionsCheck, TheResectionConsensusIsByModeOrAFactorOfAtLeastOne) {
+  TrackerOptions options;
+  options.central = false;
+  EXPECT_EQ(options.ResectionConsensusAngleFactor(), 3.0);
+  options.central = true;
+  EXPECT_EQ(options.ResectionConsensusAngleFactor(), 1.0);
+  options.resection_consensus_angle_factor = 2.0;
+  EXPECT_EQ(options.ResectionConsensusAngleFactor(), 2.0);
+  EXPECT_EQ(options.Check(), "");
+  for (const double bad : {0.5, -1.0, 101.0, std::nan("")}) {
+    options.resection_consensus_angle_factor = bad;
+    EXPECT_NE(options.Check().find("resection_consensus_angle_factor"), std::string::npos) << bad;
+  }
+}
+
+}  // namespace
+}  // namespace omni

@@ -9,6 +9,7 @@
 
 #include "calib/error.h"
 #include "sfm/harris.h"
+#include "sfm/ransac.h"
 
 namespace omni {
 
@@ -146,7 +147,7 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
   o->sfm.tracker.central = o->central ? true : o->non_central ? false : rig.central;
   if (o->corners < 0) throw InputError("", "--corners", "expected 0 (from the rig) or a count");
   const double consensus = o->sfm.tracker.resection_consensus_angle_factor;
-  if (consensus != 0.0 && !(consensus >= 1.0 && consensus <= 100.0))
+  if (consensus != 0.0 && !ValidConsensusAngleFactor(consensus))
     throw InputError("", "--resection-consensus", "expected 0 (from the mode) or 1 to 100");
   if (o->continuation_pool != 0.0) {
     if (!(o->continuation_pool >= 1.0 && o->continuation_pool <= 10.0))

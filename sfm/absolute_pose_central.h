@@ -22,7 +22,7 @@ struct CentralAbsolutePoseOptions {
   double consensus_angle_factor = 1.0;
 
   std::string Check() const {
-    if (!(consensus_angle_factor >= 1.0 && consensus_angle_factor <= 100.0))
+    if (!ValidConsensusAngleFactor(consensus_angle_factor))
       return "consensus_angle_factor: expected 1 to 100";
     const std::string problem = ransac.Check();
     return problem.empty() ? problem : "ransac." + problem;

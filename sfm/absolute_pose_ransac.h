@@ -220,15 +220,24 @@ inline bool RefineOnInliers(const AbsolutePoseScorer& scorer, double threshold, 
   return true;
 }
 
+// The inliers of `model` within threshold, then the model refined on them (RefineOnInliers) up
+// to kRepeatedRefinements times, each kept while it keeps at least as many (none when `refine`
+// is false): the prior's and the consensus's estimate.
+constexpr int kRepeatedRefinements = 2;
+inline void SelectAndRefine(const AbsolutePoseScorer& scorer, double threshold, int sample_size,
+                            bool refine, opengv::transformation_t* model,
+                            std::vector<int>* inliers) {
+  scorer.Select(*model, threshold, inliers);
+  for (int round = 0; round < kRepeatedRefinements && refine; ++round) {
+    if (!RefineOnInliers(scorer, threshold, sample_size, model, inliers)) break;
+  }
+}
+
 // Hypotheses solved at once: never more than the iterations the adaptive stopping still
 // expects (so that a short run does not solve many extra samples), at least 2 (two cores).
 constexpr int kMaxHypothesisBatch = 16;
 
 using AbsolutePoseProblem = opengv::sac_problems::absolute_pose::AbsolutePoseSacProblem;
-
-// Refinements of the best model on the correspondences within the consensus threshold, each
-// kept while it keeps at least as many of them.
-constexpr int kConsensusRefinements = 2;
 
 // `hypothesis_centre`: when given, the problem's hypotheses are poses of a frame with the rig's
 // axes at this point of the rig (a central solver on bearings from one centre), taken to
@@ -254,10 +263,7 @@ inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProb
   if (prior != nullptr) {
     opengv::transformation_t candidate = prior->pose.ToMatrix();
     std::vector<int> inliers;
-    scorer.Select(candidate, threshold, &inliers);
-    for (int round = 0; round < 2 && options.refine; ++round) {
-      if (!RefineOnInliers(scorer, threshold, sample_size, &candidate, &inliers)) break;
-    }
+    SelectAndRefine(scorer, threshold, sample_size, options.refine, &candidate, &inliers);
     if (static_cast<int>(inliers.size()) >= std::max(min_inliers, prior->accept_inliers)) {
       result.success = true;
       result.from_prior = true;
@@ -333,12 +339,8 @@ inline RansacResult RunAbsolutePoseRansac(const std::shared_ptr<AbsolutePoseProb
   if (!have_model) return result;
 
   std::vector<int> inliers;
-  if (wider_consensus && options.refine) {
-    scorer.Select(best_model, consensus_threshold, &inliers);
-    for (int round = 0; round < kConsensusRefinements; ++round) {
-      if (!RefineOnInliers(scorer, consensus_threshold, sample_size, &best_model, &inliers)) break;
-    }
-  }
+  if (wider_consensus && options.refine)
+    SelectAndRefine(scorer, consensus_threshold, sample_size, true, &best_model, &inliers);
   scorer.Select(best_model, threshold, &inliers);
   if (options.refine) RefineOnInliers(scorer, threshold, sample_size, &best_model, &inliers);
   result.num_iterations = iterations;

@@ -27,6 +27,10 @@ struct RansacOptions {
   std::string Check() const;
 };
 
+// The range of the absolute-pose options' consensus_angle_factor (and of the tracker's, which
+// also takes 0 for "by mode"): counting within at least the inliers' angle, at most 100 times.
+inline bool ValidConsensusAngleFactor(double factor) { return factor >= 1.0 && factor <= 100.0; }
+
 // A pose tried before the resection's RANSAC (the motion model's prediction, or the frame's
 // earlier resection): its inliers at the RANSAC's threshold, the pose refined on them and the
 // inliers selected again (twice, each kept only when it has at least as many), are the estimate

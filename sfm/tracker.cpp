@@ -85,7 +85,7 @@ std::string TrackerOptions::Check() const {
     return "stereo_min_ray_angle: expected a positive angle (radians)";
   if (min_resection_inliers < 4) return "min_resection_inliers: expected at least 4";
   if (resection_consensus_angle_factor != 0.0 &&
-      !(resection_consensus_angle_factor >= 1.0 && resection_consensus_angle_factor <= 100.0))
+      !ValidConsensusAngleFactor(resection_consensus_angle_factor))
     return "resection_consensus_angle_factor: expected 0 (by mode) or 1 to 100";
   if (min_consistent_inliers != 0 &&
       (min_consistent_inliers < 6 || min_consistent_inliers > min_resection_inliers))

@@ -153,7 +153,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   std::vector<double> surface_ms;
   for (const KeyframeStats& st : stats) {
     csv << KeyframeStatsCsvRow(st) << "\n";
-    if (!st.batch) surface_ms.push_back(st.ms_total);
+    if (!st.batch) surface_ms.push_back(MsPerKeyframe(st));
   }
   WriteTextFileAtomically(out / "stats" / "keyframes.csv", csv.str());
   const double surface_seconds = SecondsSince(surface_start);

@@ -203,7 +203,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
 
   std::vector<double> surface_ms, queue_ms;
   for (const PipelineKeyframeRow& row : result.surface_rows) {
-    if (!row.surface.batch) surface_ms.push_back(row.surface.ms_total);
+    if (!row.surface.batch) surface_ms.push_back(MsPerKeyframe(row.surface));
     queue_ms.push_back(row.queue_ms);
   }
   const SfmStats& stats = outputs.stats;

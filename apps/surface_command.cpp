@@ -308,7 +308,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   std::vector<double> ms;
   size_t max_e = 0, added = 0, rejected = 0;
   for (const KeyframeStats& st : stats) {
-    if (!st.batch) ms.push_back(st.ms_total);
+    if (!st.batch) ms.push_back(MsPerKeyframe(st));
     max_e = std::max(max_e, st.cells_e);
     added += st.points_added;
     rejected += st.points_rejected;
@@ -430,6 +430,12 @@ void AddEnclosingOptions(CLI::App* command, std::string* enclosing, SculptorOpti
 }
 
 void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
+  command
+      ->add_option("--keyframes-per-step", sculptor->keyframes_per_step,
+                   "Sculpt the keyframes after the first ones this many at a time (their points "
+                   "inserted together, their rays traced once); the surface lags by up to this "
+                   "many keyframes less one")
+      ->capture_default_str();
   command->add_flag("--smooth-every-keyframe", sculptor->smoothing.every_keyframe,
                     "Smooth δO after every keyframe (the paper's incremental smoothing; default: "
                     "once, when the surface is taken at the end or for a snapshot)");

@@ -283,9 +283,11 @@ double Quantile(std::vector<double> v, double q) {
   return v[std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())))];
 }
 
-// The live per-keyframe surface times of stats/keyframes.csv (see EvalPipeline); false when
-// the file or its keyframe / ms_total columns are missing.
-bool LiveSurfaceTimes(const fs::path& csv, std::vector<double>* ms) {
+// The live per-keyframe surface times of stats/keyframes.csv (see EvalPipeline): a step's
+// ms_total over its keyframes (the keyframes column; 1 when absent); false when the file or its
+// keyframe / ms_total columns are missing. *keyframes: the keyframes of those steps.
+bool LiveSurfaceTimes(const fs::path& csv, std::vector<double>* ms, long* keyframes_sculpted) {
+  *keyframes_sculpted = 0;
   if (!fs::exists(csv)) return false;
   const std::vector<std::string> names = CsvHeader(csv);
   auto column = [&names](const char* name) {
@@ -293,7 +295,7 @@ bool LiveSurfaceTimes(const fs::path& csv, std::vector<double>* ms) {
     return it == names.end() ? -1 : static_cast<int>(it - names.begin());
   };
   const int keyframe_column = column("keyframe"), ms_column = column("ms_total"),
-            batch_column = column("batch");
+            batch_column = column("batch"), keyframes_column = column("keyframes");
   if (keyframe_column < 0 || ms_column < 0) return false;
   std::ifstream in(csv);
   std::string line;
@@ -304,15 +306,29 @@ bool LiveSurfaceTimes(const fs::path& csv, std::vector<double>* ms) {
     std::stringstream stream(line);
     std::string field;
     while (std::getline(stream, field, ',')) fields.push_back(field);
-    if (static_cast<int>(fields.size()) <= std::max({keyframe_column, ms_column, batch_column}))
+    if (static_cast<int>(fields.size()) <=
+        std::max({keyframe_column, ms_column, batch_column, keyframes_column}))
       continue;
     if (!seen.insert(fields[keyframe_column]).second) continue;  // a replay's row
     if (batch_column >= 0 && fields[batch_column] != "0") continue;
+    double ms_total = 0.0, keyframes = 1.0;
     try {
-      ms->push_back(std::stod(fields[ms_column]));
+      ms_total = std::stod(fields[ms_column]);
     } catch (const std::exception&) {
       throw InputError(csv, "ms_total", "not a number: \"" + fields[ms_column] + "\"");
     }
+    if (keyframes_column >= 0) {
+      try {
+        keyframes = std::stod(fields[keyframes_column]);
+      } catch (const std::exception&) {
+        keyframes = std::numeric_limits<double>::quiet_NaN();
+      }
+      if (!(keyframes >= 1.0))
+        throw InputError(csv, "keyframes",
+                         "not a count of keyframes: \"" + fields[keyframes_column] + "\"");
+    }
+    ms->push_back(ms_total / keyframes);
+    *keyframes_sculpted += static_cast<long>(keyframes);
   }
   return true;
 }
@@ -357,8 +373,9 @@ EvalPipeline ReadEvalPipeline(const fs::path& rec) {
       pipeline.loop_closures.push_back(e);
     }
     std::vector<double> ms;
-    if (LiveSurfaceTimes(rec / "stats" / "keyframes.csv", &ms)) {
-      pipeline.surface_keyframes = static_cast<long>(ms.size());
+    long keyframes_sculpted = 0;
+    if (LiveSurfaceTimes(rec / "stats" / "keyframes.csv", &ms, &keyframes_sculpted)) {
+      pipeline.surface_keyframes = keyframes_sculpted;
       pipeline.surface_ms_median = Quantile(ms, 0.5);
       pipeline.surface_ms_p95 = Quantile(ms, 0.95);
       pipeline.surface_ms_source = "stats/keyframes.csv";

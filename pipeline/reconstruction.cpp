@@ -27,6 +27,12 @@
 
 namespace omni {
 
+SculptorOptions PipelineOptions::DefaultSculptor() {
+  SculptorOptions sculptor;
+  sculptor.keyframes_per_step = 3;
+  return sculptor;
+}
+
 std::string PipelineOptions::Check() const {
   for (const auto& [name, check] :
        {std::pair<const char*, std::string>{"sfm", sfm.Check()}, {"sculptor", sculptor.Check()}})

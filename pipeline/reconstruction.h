@@ -29,7 +29,8 @@ struct PipelineOptions {
   // The SfM (pipeline/sfm_runner.h): after a loop correction the surface thread replays the
   // sculptor on the corrected finalised keyframes (the keyframes queued meanwhile wait).
   SfmRunnerOptions sfm;
-  SculptorOptions sculptor;
+  // The sculptor's defaults but for keyframes_per_step (DefaultSculptor).
+  SculptorOptions sculptor = DefaultSculptor();
   LoopReplay loop_replay = LoopReplay::kBatch;
   // Keyframes waiting between the SfM and the surface threads; a full queue stalls the SfM
   // (backpressure), so memory stays bounded however slow the surface is. A keyframe item is
@@ -42,7 +43,12 @@ struct PipelineOptions {
   // queue; when both want a core the SfM gets it, and a surface that falls behind still gets the
   // cores whenever the SfM waits (a full queue, the end of the input). docs/figures.md F40.
   int surface_thread_nice = 10;
-  int snapshot_every = 0;        // snapshot callback every K sculpted keyframes; 0: none
+  int snapshot_every = 0;  // snapshot callback every K sculpted keyframes; 0: none
+  // The surface sculpted three keyframes a step (SculptorOptions::keyframes_per_step): the final
+  // surface is sculpted again in one batch after the SfM's final adjustment (a corrected map),
+  // so the steps shape only the live surface, at about 0.7 of the surface thread's time
+  // (docs/figures.md F53).
+  static SculptorOptions DefaultSculptor();
   double progress_period = 2.0;  // seconds between two progress callbacks
 
   std::string Check() const;

@@ -34,8 +34,10 @@ def timing_summary(out, loop_radius=77.0, loop_gap=60):
             centres[i] = tuple(float(x) for x in f[1:4])  # the rig origin: close to the centre
     inc = [r for r in rows if r["batch"] == "0"]
     f = lambda r, k: float(r.get(k, 0) or 0)
-    total = [f(r, "ms_total") for r in inc]
-    steps15 = [f(r, "ms_total") - f(r, "ms_genus") - f(r, "ms_smooth") for r in inc]
+    # A row is a step of one or more keyframes (the keyframes column): its time per keyframe.
+    per = lambda r: max(1.0, float(r.get("keyframes", 1) or 1))
+    total = [f(r, "ms_total") / per(r) for r in inc]
+    steps15 = [(f(r, "ms_total") - f(r, "ms_genus") - f(r, "ms_smooth")) / per(r) for r in inc]
 
     def in_loop_zone(r):
         k = int(r["keyframe"])
@@ -45,7 +47,7 @@ def timing_summary(out, loop_radius=77.0, loop_gap=60):
         return any(math.dist(c, centres[j]) < loop_radius for j in range(0, k - loop_gap)
                    if j in centres)
 
-    kept = [(f(r, "ms_total"), s) for r, s in zip(inc, steps15) if not in_loop_zone(r)]
+    kept = [(t, s) for r, t, s in zip(inc, total, steps15) if not in_loop_zone(r)]
     fifth = max(1, len(kept) // 5)
     flat = lambda i: (statistics.mean(x[i] for x in kept[-fifth:]) /
                       max(1e-9, statistics.mean(x[i] for x in kept[:fifth]))) if kept else 0.0

@@ -52,6 +52,8 @@ std::string SculptorOptions::Check() const {
     return "init_keyframes must be >= 2 to measure the scale s";
   }
   if (init_keyframes < 1) return "init_keyframes must be >= 1";
+  if (keyframes_per_step < 1 || keyframes_per_step > 64)
+    return "keyframes_per_step must be in [1, 64]";
   if (max_vertex_passes < 0) return "max_vertex_passes must be >= 0";
   if (enclosing_margin < 0) return "enclosing_margin must be >= 0";
   if (enclosing_rounds < 0) return "enclosing_rounds must be >= 0";
@@ -72,6 +74,10 @@ std::string SculptorOptions::Check() const {
   return "";
 }
 
+double MsPerKeyframe(const KeyframeStats& stats) {
+  return stats.ms_total / static_cast<double>(std::max<size_t>(1, stats.keyframes));
+}
+
 std::string KeyframeStatsCsvHeader() {
   return "keyframe,batch,points_in,points_filtered,points_added,points_rejected,"
          "points_duplicate,steiner_added,rays_new,rays_old,cells_e,cells_n,o_left_in_e,cells_t,"
@@ -82,7 +88,7 @@ std::string KeyframeStatsCsvHeader() {
          "points_filtered_length,points_filtered_aperture,enclose_rounds,cells_e_added,"
          "cells_active,smoothing_candidates,cells_grow_extra,old_ray_facets,"
          "old_ray_facets_uncrossed,old_ray_queries,old_ray_query_voxels,old_ray_facet_tests,"
-         "old_ray_plane_passes,cells_enclosed_free,ms_enclosed_free";
+         "old_ray_plane_passes,cells_enclosed_free,ms_enclosed_free,keyframes";
 }
 
 std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
@@ -102,7 +108,8 @@ std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
     << ',' << s.cells_e_added << ',' << s.cells_active << ',' << s.smoothing_candidates << ','
     << s.cells_grow_extra << ',' << s.old_ray_facets << ',' << s.old_ray_facets_uncrossed << ','
     << s.old_ray_queries << ',' << s.old_ray_query_voxels << ',' << s.old_ray_facet_tests << ','
-    << s.old_ray_plane_passes << ',' << s.cells_enclosed_free << ',' << s.ms_enclosed_free;
+    << s.old_ray_plane_passes << ',' << s.cells_enclosed_free << ',' << s.ms_enclosed_free << ','
+    << s.keyframes;
   return o.str();
 }
 
@@ -198,6 +205,8 @@ struct IncrementalSculptor::Impl {
   DelaunayMesh mesh;
   DelaunayMesh::Impl& t;  // T and O bookkeeping
   std::vector<SurfaceKeyframe> buffered;
+  // Keyframes after s is known, waiting for a step of keyframes_per_step.
+  std::vector<SurfaceKeyframe> pending;
   double s = 0.0;           // scale of §5.1
   double spacing = 0.0;     // mean keyframe spacing of the first keyframes (s measured)
   double ground = 0.0;      // b of the ground filter
@@ -544,6 +553,22 @@ struct IncrementalSculptor::Impl {
       }
     }
     return added;
+  }
+
+  // The cells in the balls of the keyframes' centres (CellsInBall), each once.
+  std::vector<CellHandle> CellsInBalls(const std::vector<const SurfaceKeyframe*>& group,
+                                       double radius) {
+    if (group.size() == 1) return CellsInBall(group.front()->centre, radius);
+    std::vector<CellHandle> cells;
+    for (const SurfaceKeyframe* kf : group) {
+      const std::vector<CellHandle> in_ball = CellsInBall(kf->centre, radius);
+      cells.insert(cells.end(), in_ball.begin(), in_ball.end());
+    }
+    const auto address = [](const CellHandle& c) { return &*c; };
+    std::sort(cells.begin(), cells.end(),
+              [&](const CellHandle& a, const CellHandle& b) { return address(a) < address(b); });
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    return cells;
   }
 
   // Cells included in the ball (all four vertices inside), found by a search from the cell
@@ -1027,14 +1052,16 @@ struct IncrementalSculptor::Impl {
   // candidates are walked while the keyframe's rays join the ray grid (RegisterRays: the walks
   // do not read it).
   void TraceRays(const std::vector<RayTask>& new_rays, const std::vector<CellHandle>& n_cells,
-                 const KeyframeRecord& kf, KeyframeStats& st) {
+                 const std::vector<KeyframeRecord>& recs, KeyframeStats& st) {
     const bool old_rays = !n_cells.empty() && num_registered_rays > 0;
     if (old_rays) CollectOldRayBorder(n_cells, st);
     tbb::task_group side;
     if (old_rays) side.run([&] { SelectOldRays(st); });
     Trace(new_rays, false);
     side.wait();
-    side.run([&] { RegisterRays(kf); });
+    side.run([&] {
+      for (const KeyframeRecord& rec : recs) RegisterRays(rec);
+    });
     if (old_rays) WalkOldRays(st);
     side.wait();
   }
@@ -1239,7 +1266,10 @@ struct IncrementalSculptor::Impl {
   }
 
   // ---- One keyframe, paper §4 steps 1–6 ----
-  KeyframeStats Incremental(const SurfaceKeyframe& kf) {
+  // Steps 1-6 for one keyframe, or for several at once (SculptorOptions::keyframes_per_step):
+  // their points are inserted together and their rays traced once, after all the insertions,
+  // so the rays of a keyframe of the group are not re-traced over the new cells of the next.
+  KeyframeStats Incremental(const std::vector<const SurfaceKeyframe*>& group) {
     const auto start = Clock::now();
     ++stamp;
     new_vertices.clear();
@@ -1247,23 +1277,28 @@ struct IncrementalSculptor::Impl {
     t.touched = &touched;
     t.touch_stamp = stamp;
     KeyframeStats st;
-    st.keyframe = kf.id;
-    st.points_in = kf.points.size();
+    st.keyframe = group.back()->id;
+    st.keyframes = group.size();
     single_tests_skipped = attempts_skipped = 0;
-    const std::vector<const SurfacePoint*> kept = Filter(kf, st);
+    std::vector<std::vector<const SurfacePoint*>> kept_of(group.size());
+    for (size_t g = 0; g < group.size(); ++g) {
+      st.points_in += group[g]->points.size();
+      kept_of[g] = Filter(*group[g], st);
+    }
 
     auto tick = Clock::now();
-    st.steiner_added = MaterialiseGrid(kf.centre);
+    for (const SurfaceKeyframe* kf : group) st.steiner_added += MaterialiseGrid(kf->centre);
     t.UpdateDegrees(new_vertices);  // the stars the manifold tests count (VertexOnSurface)
     st.ms_steiner = MsSince(tick);
 
     // Step 1: E = cells in B_{r+l}(c_{t+1}), or the conflict zones of the points plus a margin.
     tick = Clock::now();
     std::vector<Point> kept_points;
-    for (const SurfacePoint* p : kept) kept_points.push_back(ToCgal(p->position));
+    for (const auto& kept : kept_of)
+      for (const SurfacePoint* p : kept) kept_points.push_back(ToCgal(p->position));
     const std::vector<CellHandle> e_cells =
         options.enclosing == EnclosingMode::kBall
-            ? CellsInBall(kf.centre, r + l)
+            ? CellsInBalls(group, r + l)
             : CellsInConflictZones(kept_points, options.enclosing_margin);
     st.cells_e = e_cells.size();
     st.ms_enclose = MsSince(tick);
@@ -1326,20 +1361,23 @@ struct IncrementalSculptor::Impl {
 
     // Step 3: insert the points whose conflict zone misses O.
     tick = Clock::now();
-    KeyframeRecord rec;
-    rec.id = kf.id;
-    rec.centre = kf.centre;
-    const auto sorted = SpatiallySorted(kept);
-    CellHandle hint = t.tri.locate(ToCgal(kf.centre));
-    for (const auto& [pt, p] : sorted) {
-      bool duplicate;
-      const VertexHandle v = InsertFree(pt, hint, &duplicate, &st);
-      if (v == VertexHandle()) {
-        ++(duplicate ? st.points_duplicate : st.points_rejected);
-        continue;
+    std::vector<KeyframeRecord> recs(group.size());
+    for (size_t g = 0; g < group.size(); ++g) {
+      KeyframeRecord& rec = recs[g];
+      rec.id = group[g]->id;
+      rec.centre = group[g]->centre;
+      const auto sorted = SpatiallySorted(kept_of[g]);
+      CellHandle hint = t.tri.locate(ToCgal(group[g]->centre));
+      for (const auto& [pt, p] : sorted) {
+        bool duplicate;
+        const VertexHandle v = InsertFree(pt, hint, &duplicate, &st);
+        if (v == VertexHandle()) {
+          ++(duplicate ? st.points_duplicate : st.points_rejected);
+          continue;
+        }
+        AddPoint(*p, v, rec);
+        ++st.points_added;
       }
-      AddPoint(*p, v, rec);
-      ++st.points_added;
     }
     t.UpdateDegrees(new_vertices);  // the stars the manifold tests count (VertexOnSurface)
     const std::vector<CellHandle> n_cells = NewCells();
@@ -1349,19 +1387,20 @@ struct IncrementalSculptor::Impl {
     // Step 4: new rays fully, old rays over N.
     tick = Clock::now();
     std::vector<RayTask> tasks;
-    for (int i : rec.points) {
-      for (const Eigen::Vector3d& o : points[i].origins)
-        tasks.emplace_back(points[i].vertex, ToCgal(o));
-    }
+    for (const KeyframeRecord& rec : recs)
+      for (int i : rec.points) {
+        for (const Eigen::Vector3d& o : points[i].origins)
+          tasks.emplace_back(points[i].vertex, ToCgal(o));
+      }
     st.rays_new = tasks.size();
-    TraceRays(tasks, n_cells, rec, st);
-    TraceFreeRays(kf, st);
-    keyframes.push_back(std::move(rec));
+    TraceRays(tasks, n_cells, recs, st);
+    for (const SurfaceKeyframe* kf : group) TraceFreeRays(*kf, st);
+    for (KeyframeRecord& rec : recs) keyframes.push_back(std::move(rec));
     st.ms_rays = MsSince(tick);
 
     // Step 5: grow O in F, within E (recomputed: insertion replaced cells) and N.
     tick = Clock::now();
-    if (options.enclosing == EnclosingMode::kBall) surviving = CellsInBall(kf.centre, r + l);
+    if (options.enclosing == EnclosingMode::kBall) surviving = CellsInBalls(group, r + l);
     std::vector<CellHandle> active = ActiveCells(n_cells, surviving);
     const auto enclosed_tick = Clock::now();
     st.cells_enclosed_free = FreeEnclosedCells(active);
@@ -1382,7 +1421,12 @@ struct IncrementalSculptor::Impl {
         touched.push_back(v);
       }
     }
-    PostProcess(active, &touched, kf.centre, r + l, st);  // step 6
+    // The smoothing's ball (when it runs every keyframe): around the last centre, reaching the
+    // others' balls too.
+    double reach = r + l;
+    for (const SurfaceKeyframe* kf : group)
+      reach = std::max(reach, (kf->centre - group.back()->centre).norm() + r + l);
+    PostProcess(active, &touched, group.back()->centre, reach, st);  // step 6
     t.touched = nullptr;
 
     FinishStats(st);
@@ -1397,6 +1441,7 @@ struct IncrementalSculptor::Impl {
     new_vertices.clear();
     KeyframeStats st;
     st.batch = true;
+    st.keyframes = kfs.size();
     single_tests_skipped = attempts_skipped = 0;
     st.keyframe = kfs.back().id;
     auto tick = Clock::now();
@@ -1547,10 +1592,26 @@ struct IncrementalSculptor::Impl {
     if (options.batch_init) {
       out.push_back(Batch(buffered));
     } else {
-      for (const SurfaceKeyframe& kf : buffered) out.push_back(Incremental(kf));
+      pending.insert(pending.end(), buffered.begin(), buffered.end());
     }
     buffered.clear();
+    ProcessPending(false, &out);
     return out;
+  }
+
+  // The keyframes waiting for a step of keyframes_per_step, in such steps; `all`: the last
+  // ones too, in a smaller step.
+  void ProcessPending(bool all, std::vector<KeyframeStats>* out) {
+    const size_t per_step = static_cast<size_t>(options.keyframes_per_step);
+    size_t begin = 0;
+    while (pending.size() - begin >= per_step || (all && begin < pending.size())) {
+      const size_t end = std::min(pending.size(), begin + per_step);
+      std::vector<const SurfaceKeyframe*> group;
+      for (size_t k = begin; k < end; ++k) group.push_back(&pending[k]);
+      out->push_back(Incremental(group));
+      begin = end;
+    }
+    pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(begin));
   }
 };
 
@@ -1561,7 +1622,12 @@ IncrementalSculptor::~IncrementalSculptor() = default;
 
 std::vector<KeyframeStats> IncrementalSculptor::AddKeyframe(const SurfaceKeyframe& keyframe) {
   Impl& m = *impl_;
-  if (m.s > 0.0) return {m.Incremental(keyframe)};
+  if (m.s > 0.0) {
+    m.pending.push_back(keyframe);
+    std::vector<KeyframeStats> out;
+    m.ProcessPending(false, &out);
+    return out;
+  }
   m.buffered.push_back(keyframe);
   const bool known = m.options.scale > 0.0 && !m.options.batch_with_known_scale;
   if (static_cast<int>(m.buffered.size()) >= m.options.init_keyframes || known) {
@@ -1570,7 +1636,11 @@ std::vector<KeyframeStats> IncrementalSculptor::AddKeyframe(const SurfaceKeyfram
   return {};
 }
 
-std::vector<KeyframeStats> IncrementalSculptor::Finish() { return impl_->ProcessBuffered(); }
+std::vector<KeyframeStats> IncrementalSculptor::Finish() {
+  std::vector<KeyframeStats> out = impl_->ProcessBuffered();
+  impl_->ProcessPending(true, &out);
+  return out;
+}
 
 TriangleMesh IncrementalSculptor::ExtractMesh(std::vector<PointId>* vertex_points) const {
   impl_->SmoothPending();

@@ -174,6 +174,13 @@ struct SculptorOptions {
   // (paper §5.1: T_40, F_40, O_40), otherwise one by one like the others.
   int init_keyframes = 40;
   bool batch_init = true;
+  // After the first ones, keyframes are sculpted this many at a time: their points inserted
+  // together and their rays traced once, after all the insertions (a keyframe's rays are then
+  // not re-traced over the next one's new cells, and the steps' fixed costs are shared). The
+  // surface lags by up to keyframes_per_step − 1 keyframes; Finish sculpts the last ones in a
+  // smaller step. 1: each keyframe as it comes (the paper). With the ball E, E is the union of
+  // the step's balls.
+  int keyframes_per_step = 1;
   // With a known scale, still buffer the first init_keyframes keyframes and sculpt them in one
   // batch (with batch_init): the re-sculpt of a map corrected by a loop closure keeps the first
   // sculpting's s (pipeline/). Otherwise a known scale sculpts each keyframe as it comes.
@@ -234,10 +241,13 @@ struct SculptorOptions {
   std::string Check() const;
 };
 
-// One row per processed keyframe (the batch initialisation is one row, batch = true).
+// One row per step: a keyframe, or keyframes_per_step of them, or the batch initialisation
+// (batch = true).
 struct KeyframeStats {
-  KeyframeId keyframe;
+  KeyframeId keyframe;  // the last keyframe of the step
   bool batch = false;
+  // Keyframes sculpted in this step (SculptorOptions::keyframes_per_step; the batch: all of it).
+  size_t keyframes = 1;
   size_t points_in = 0;         // points received
   size_t points_filtered = 0;   // removed by the §5.1 filters: the sum of the four below
   size_t points_added = 0;      // inserted in T
@@ -311,6 +321,10 @@ struct KeyframeStats {
 void ColorMeshVertices(const std::vector<PointId>& vertex_points,
                        const std::unordered_map<PointId, Rgb8>& point_colors, TriangleMesh* mesh,
                        uint8_t grey = 128);
+
+// The surface time per keyframe of a step: its ms_total over its keyframes (amortised when
+// SculptorOptions::keyframes_per_step sculpts several at once).
+double MsPerKeyframe(const KeyframeStats& stats);
 
 std::string KeyframeStatsCsvHeader();
 std::string KeyframeStatsCsvRow(const KeyframeStats& stats);

@@ -375,10 +375,11 @@
     const header = lines.length ? lines[0].split(',') : [];
     const col = (name) => header.indexOf(name);
     const ck = col('keyframe'), cb = col('batch'), cm = col('ms_total'), cr = col('replay');
+    const cn = col('keyframes');  // keyframes sculpted in the row's step: ms per keyframe
     for (let i = 1; i < lines.length; ++i) {
       const f = lines[i].split(',');
       if (ck < 0 || cm < 0) break;
-      rows.push({ keyframe: +f[ck], batch: cb >= 0 && +f[cb] > 0, ms: +f[cm], replay: cr >= 0 ? +f[cr] : 0 });
+      rows.push({ keyframe: +f[ck], batch: cb >= 0 && +f[cb] > 0, ms: +f[cm] / (cn >= 0 ? Math.max(1, +f[cn]) : 1), replay: cr >= 0 ? +f[cr] : 0 });
     }
   }
   function DrawPlot() {

@@ -8,11 +8,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <numeric>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
@@ -21,6 +23,7 @@
 #include "calib/ply.h"
 #include "calib/tum.h"
 #include "eval/pose_eval.h"
+#include "pipeline/reconstruction.h"
 #include "surface/sculptor.h"
 #include "tests/apps/point_colors_check.h"
 #include "tests/apps/reconstruction_checks.h"
@@ -58,6 +61,13 @@ TEST(ReconstructCommand, RefusesAMissingOutAndABadDrive) {
                                        scratch);
   EXPECT_EQ(enclosing.exit_code, 2);
   EXPECT_NE(enclosing.err.find("--enclosing"), std::string::npos) << enclosing.err;
+  EXPECT_FALSE(fs::exists(scratch / "out.incomplete"));
+  const auto steps = RunOmnisculpt({"reconstruct", OMNI_SHORT_DRIVE_DIR, "--out",
+                                    (scratch / "out").string(), "--keyframes-per-step", "0"},
+                                   scratch);
+  EXPECT_EQ(steps.exit_code, 2);
+  EXPECT_EQ(std::count(steps.err.begin(), steps.err.end(), '\n'), 1) << steps.err;
+  EXPECT_NE(steps.err.find("keyframes_per_step"), std::string::npos) << steps.err;
   EXPECT_FALSE(fs::exists(scratch / "out.incomplete"));
 }
 
@@ -304,7 +314,9 @@ TEST(ReconstructShortDrive, TheBallEnclosingSetGivesAManifoldToo) {
   // drive: ReconstructShortDrive.EveryStageRunsAndTheSurfaceIsAManifold).
   const std::vector<std::string> rows = SplitText(ReadTextFile(out / "stats" / "keyframes.csv"));
   const std::vector<int> rounds = IntColumn(rows, "enclose_rounds");
-  ASSERT_GT(rounds.size(), 9u);
+  const std::vector<int> keyframes = IntColumn(rows, "keyframes");  // sculpted in each row's step
+  ASSERT_EQ(keyframes.size(), rounds.size());
+  ASSERT_GT(std::accumulate(keyframes.begin(), keyframes.end(), 0), 9);
   for (size_t r = 0; r < rounds.size(); ++r) EXPECT_EQ(rounds[r], 0) << rows[r + 1];
 }
 
@@ -463,7 +475,24 @@ TEST(ReconstructShortDrive, LoopClosureLowersThePoseErrorAndTheLoopMeets) {
   ASSERT_FALSE(last_rows.empty());
   EXPECT_EQ(last_rows[0][1], "1");  // batch
   for (size_t r = 1; r < last_rows.size(); ++r) EXPECT_EQ(last_rows[r][1], "0");
-  EXPECT_EQ(last_rows.size(), 1 + summary["keyframes"].get<size_t>() - replayed);
+  // The batch row holds the replayed keyframes, each later row a step of keyframes_per_step; the
+  // final replay takes over with fewer than a step waiting.
+  const std::vector<std::string> header = SplitText(rows[0], ',');
+  const size_t keyframes_column =
+      std::find(header.begin(), header.end(), "keyframes") - header.begin();
+  ASSERT_LT(keyframes_column, header.size());
+  const size_t per_step = static_cast<size_t>(PipelineOptions().sculptor.keyframes_per_step);
+  EXPECT_EQ(std::stoul(last_rows[0][keyframes_column]), replayed);
+  size_t sculpted = 0;
+  for (size_t r = 0; r < last_rows.size(); ++r) {
+    if (r > 0) {
+      EXPECT_EQ(std::stoul(last_rows[r][keyframes_column]), per_step);
+    }
+    sculpted += std::stoul(last_rows[r][keyframes_column]);
+  }
+  const size_t keyframes = summary["keyframes"].get<size_t>();
+  EXPECT_LE(sculpted, keyframes);
+  EXPECT_GT(sculpted + per_step, keyframes);
   EXPECT_GT(std::stoul(last_rows[0][2]), 0u);  // points_in
 }
 

@@ -15,8 +15,8 @@
 #include <numeric>
 #include <string>
 
-#include "pipeline/gt_keyframes.h"
 #include "calib/mesh_check.h"
+#include "pipeline/gt_keyframes.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -97,7 +97,7 @@ void BM_Sculpt(benchmark::State& state) {
     added += st.points_added;
     rejected += st.points_rejected;
     if (st.batch) continue;
-    ms.push_back(st.ms_total);
+    ms.push_back(MsPerKeyframe(st));
     max_e = std::max(max_e, st.cells_e);
   }
   const size_t fifth = std::max<size_t>(1, ms.size() / 5);

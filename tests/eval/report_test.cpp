@@ -288,6 +288,21 @@ TEST_F(EvalTest, ReconstructJsonGivesThePipelineSectionWithTheLoopClosures) {
       std::string::npos)
       << md.str();
 
+  // Steps of several keyframes (the keyframes column): a step's time over its keyframes, which
+  // all count. Live: 4-5 in 20 ms, 6-8 in 120, then the replay, then 9-10 in 100: 10, 40, 50.
+  std::ofstream(rec_ / "stats" / "keyframes.csv")
+      << "keyframe,batch,cells_e,ms_enclose,ms_total,keyframes,queue_ms,replay\n"
+         "3,1,100,1,500,3,0,0\n5,0,100,1,20,2,0,0\n8,0,100,1,120,3,0,0\n"
+         "8,1,100,1,900,6,0,1\n10,0,100,1,100,2,0,1\n";
+  const EvalPipeline steps = ReadEvalPipeline(rec_);
+  EXPECT_EQ(steps.surface_keyframes, 7);
+  EXPECT_DOUBLE_EQ(steps.surface_ms_median, 40.0);
+  EXPECT_DOUBLE_EQ(steps.surface_ms_p95, 50.0);
+  std::ofstream(rec_ / "stats" / "keyframes.csv")
+      << "keyframe,batch,cells_e,ms_enclose,ms_total,keyframes,queue_ms,replay\n"
+         "3,1,100,1,500,3,0,0\n5,0,100,1,20,0,0,0\n";
+  EXPECT_THROW(ReadEvalPipeline(rec_), InputError);  // a step of no keyframe
+
   // Without the CSV, reconstruct.json's own figures; a malformed file is an InputError.
   fs::remove(rec_ / "stats" / "keyframes.csv");
   EXPECT_DOUBLE_EQ(ReadEvalPipeline(rec_).surface_ms_median, 99.0);

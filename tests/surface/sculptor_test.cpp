@@ -68,8 +68,9 @@ struct RunSummary {
 };
 
 RunSummary RunStreet(bool batch_init, EnclosingMode enclosing,
-                     const std::vector<SurfaceKeyframe>& drive) {
+                     const std::vector<SurfaceKeyframe>& drive, int keyframes_per_step = 1) {
   SculptorOptions options;
+  options.keyframes_per_step = keyframes_per_step;
   options.init_keyframes = 10;
   options.batch_init = batch_init;
   options.enclosing = enclosing;
@@ -86,7 +87,9 @@ RunSummary RunStreet(bool batch_init, EnclosingMode enclosing,
       run.cells_f = st.cells_f;
       run.cells_o = st.cells_o;
       if (std::getenv("OMNI_PRINT_STATS")) std::cout << KeyframeStatsCsvRow(st) << "\n";
-      run.keyframes += st.batch ? 10 : 1;
+      EXPECT_EQ(st.keyframes, st.batch ? 10u : static_cast<size_t>(keyframes_per_step))
+          << "keyframe " << st.keyframe.value;
+      run.keyframes += st.keyframes;
       run.points_in += st.points_in;
       run.points_filtered += st.points_filtered;
       run.points_added += st.points_added;
@@ -94,7 +97,8 @@ RunSummary RunStreet(bool batch_init, EnclosingMode enclosing,
       EXPECT_EQ(st.points_in,
                 st.points_filtered + st.points_added + st.points_rejected + st.points_duplicate);
       EXPECT_GT(st.cells_e, 0u);
-      EXPECT_EQ(stats.size(), 1u);  // never buffered with a batch or a given s
+      // Never buffered with a batch or a given s: a row per step.
+      EXPECT_EQ(stats.size(), 1u);
       // After every keyframe: invariants, T valid, δO an oriented 2-manifold.
       const std::string problems = sculptor.CheckInvariants(true);
       EXPECT_TRUE(problems.empty()) << "keyframe " << st.keyframe.value << ": " << problems;
@@ -140,13 +144,20 @@ TEST(IncrementalSculptor, StreetStaysManifoldAfterEveryKeyframeIncrementalAndBat
     const char* name;
     bool batch;
     EnclosingMode enclosing;
+    int keyframes_per_step;
   };
   for (const Mode& mode :
-       {Mode{"batch init, ball E", true, EnclosingMode::kBall},
-        Mode{"incremental from start, ball E", false, EnclosingMode::kBall},
-        Mode{"batch init, conflict-zone E", true, EnclosingMode::kConflictZones}}) {
+       {Mode{"batch init, ball E", true, EnclosingMode::kBall, 1},
+        Mode{"incremental from start, ball E", false, EnclosingMode::kBall, 1},
+        Mode{"incremental from start, ball E, 2 keyframes a step", false, EnclosingMode::kBall, 2},
+        Mode{"batch init, conflict-zone E", true, EnclosingMode::kConflictZones, 1},
+        // Steps of several keyframes: 30 after the batch of 10 in steps of 3, 40 in steps of 2.
+        Mode{"batch init, conflict-zone E, 3 keyframes a step", true, EnclosingMode::kConflictZones,
+             3},
+        Mode{"incremental from start, conflict-zone E, 2 keyframes a step", false,
+             EnclosingMode::kConflictZones, 2}}) {
     SCOPED_TRACE(mode.name);
-    const RunSummary run = RunStreet(mode.batch, mode.enclosing, drive);
+    const RunSummary run = RunStreet(mode.batch, mode.enclosing, drive, mode.keyframes_per_step);
     const double rejected =
         static_cast<double>(run.points_rejected) /
         static_cast<double>(std::max<size_t>(1, run.points_added + run.points_rejected));
@@ -160,6 +171,41 @@ TEST(IncrementalSculptor, StreetStaysManifoldAfterEveryKeyframeIncrementalAndBat
     // With its widening rounds the conflict-zone E carves the keyframe centres too.
     ExpectStreetCarved(run, n, /*centres_in_o=*/true);
   }
+}
+
+// Steps of several keyframes: AddKeyframe returns a row only when a step is complete, Finish
+// sculpts the last keyframes in a smaller step, and every keyframe is sculpted once.
+TEST(IncrementalSculptor, KeyframesInStepsAreEachSculptedOnceAndFinishTakesTheRest) {
+  const auto drive = StreetDrive(11, 60, 3);
+  SculptorOptions options;
+  options.scale = kSpacing;  // no batch: every keyframe in the steps
+  options.batch_init = false;
+  options.keyframes_per_step = 4;
+  IncrementalSculptor sculptor(options);
+  std::vector<size_t> step_sizes;
+  std::vector<uint32_t> last_keyframes;
+  for (size_t k = 0; k < drive.size(); ++k) {
+    const std::vector<KeyframeStats> stats = sculptor.AddKeyframe(drive[k]);
+    // A step ends with every fourth keyframe, and only then.
+    ASSERT_EQ(stats.size(), (k + 1) % 4 == 0 ? 1u : 0u) << "keyframe " << k;
+    for (const KeyframeStats& st : stats) {
+      step_sizes.push_back(st.keyframes);
+      last_keyframes.push_back(st.keyframe.value);
+    }
+    EXPECT_EQ(sculptor.NumProcessedKeyframes(), (k + 1) / 4 * 4);
+  }
+  for (const KeyframeStats& st : sculptor.Finish()) {
+    step_sizes.push_back(st.keyframes);
+    last_keyframes.push_back(st.keyframe.value);
+  }
+  EXPECT_EQ(step_sizes, (std::vector<size_t>{4, 4, 3}));
+  EXPECT_EQ(last_keyframes,
+            (std::vector<uint32_t>{drive[3].id.value, drive[7].id.value, drive[10].id.value}));
+  EXPECT_EQ(sculptor.NumProcessedKeyframes(), drive.size());
+  EXPECT_TRUE(sculptor.Finish().empty());
+  const std::string problems = sculptor.CheckInvariants(true);
+  EXPECT_TRUE(problems.empty()) << problems;
+  EXPECT_TRUE(CheckMesh(sculptor.ExtractMesh()).ok);
 }
 
 // The three ways of re-tracing old rays over N (§4.4) give the same F, O and surface on the
@@ -567,6 +613,13 @@ TEST(SculptorOptions, CheckRejectsBadValues) {
   EXPECT_EQ(o.Check(), "");
   o.min_aperture_deg = 180.0;
   EXPECT_NE(o.Check(), "");
+  o = SculptorOptions();
+  o.keyframes_per_step = 0;
+  EXPECT_NE(o.Check().find("keyframes_per_step"), std::string::npos);
+  o.keyframes_per_step = 65;
+  EXPECT_NE(o.Check().find("keyframes_per_step"), std::string::npos);
+  o.keyframes_per_step = 3;
+  EXPECT_EQ(o.Check(), "");
   o = SculptorOptions();
   o.min_point_separation_factor = -1e-3;
   EXPECT_NE(o.Check().find("min_point_separation_factor"), std::string::npos);

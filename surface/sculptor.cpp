@@ -555,19 +555,17 @@ struct IncrementalSculptor::Impl {
     return added;
   }
 
-  // The cells in the balls of the keyframes' centres (CellsInBall), each once.
+  // The cells in the balls of the keyframes' centres (CellsInBall), each once, in the order the
+  // searches first met them (not by address: the order must not depend on the allocator).
   std::vector<CellHandle> CellsInBalls(const std::vector<const SurfaceKeyframe*>& group,
                                        double radius) {
     if (group.size() == 1) return CellsInBall(group.front()->centre, radius);
     std::vector<CellHandle> cells;
+    std::unordered_set<const void*> seen;
     for (const SurfaceKeyframe* kf : group) {
-      const std::vector<CellHandle> in_ball = CellsInBall(kf->centre, radius);
-      cells.insert(cells.end(), in_ball.begin(), in_ball.end());
+      for (const CellHandle& c : CellsInBall(kf->centre, radius))
+        if (seen.insert(&*c).second) cells.push_back(c);
     }
-    const auto address = [](const CellHandle& c) { return &*c; };
-    std::sort(cells.begin(), cells.end(),
-              [&](const CellHandle& a, const CellHandle& b) { return address(a) < address(b); });
-    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
     return cells;
   }
 

@@ -29,6 +29,7 @@
 #include "pipeline/colmap_keyframes.h"
 #include "pipeline/gt_keyframes.h"
 #include "pipeline/point_colors.h"
+#include "pipeline/reconstruction.h"
 #include "surface/advancing_front.h"
 #include "surface/sculptor.h"
 
@@ -47,6 +48,9 @@ struct SurfaceCommandOptions {
   AdvancingFrontOptions advancing_front;
   std::string enclosing = EnclosingName(SculptorOptions().enclosing);
   bool no_batch = false;
+  // After the stream, every keyframe sculpted again in one batch at the scale s of the first
+  // keyframes, as `reconstruct` does after the SfM's final adjustment; that surface is written.
+  bool final_batch = true;
   bool no_genus_refinement = false;  // step 6 (paper §4.6) parts switched off
   bool no_smoothing = false;
   // Write OUT/snapshots/surface_<keyframe>.ply and observed_<keyframe>.ply every K keyframes;
@@ -283,10 +287,29 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     }
   }
   snapshot(sculptor.Finish());
+  // The final batch: a new sculptor takes every keyframe in one batch at the s just measured
+  // (ReplaySculptorOptions, as the pipeline's replay); its surface is the one written.
+  std::unique_ptr<IncrementalSculptor> batch_sculptor;
+  std::vector<KeyframeStats> batch_stats;
+  double batch_seconds = 0.0;
+  if (o.final_batch && sculptor.scale() > 0.0 && !stream.empty()) {
+    const auto batch_start = std::chrono::steady_clock::now();
+    batch_sculptor = std::make_unique<IncrementalSculptor>(
+        ReplaySculptorOptions(o.sculptor, LoopReplay::kBatch, sculptor.scale(), stream.size()));
+    for (const SurfaceKeyframe& kf : stream) {
+      for (const KeyframeStats& st : batch_sculptor->AddKeyframe(kf)) batch_stats.push_back(st);
+    }
+    for (const KeyframeStats& st : batch_sculptor->Finish()) batch_stats.push_back(st);
+    batch_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - batch_start).count();
+  }
+  const IncrementalSculptor& written = batch_sculptor ? *batch_sculptor : sculptor;
+  // The counts of the points of the surface written: the batch's, or the stream's.
+  const std::vector<KeyframeStats>& written_stats = batch_sculptor ? batch_stats : stats;
 
   std::filesystem::create_directories(out / "stats");
   // The closed δO and its observed part, each vertex coloured as its point.
-  const ColoredSurfaces surfaces = ExtractColoredSurfaces(sculptor, point_colors);
+  const ColoredSurfaces surfaces = ExtractColoredSurfaces(written, point_colors);
   const TriangleMesh& closed = surfaces.closed;
   const TriangleMesh& mesh = surfaces.observed;
   const ObservedMeshStats& observed_stats = surfaces.observed_stats;
@@ -304,17 +327,19 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
 
   // The smoothing that waited for the surface to be taken (SmoothingOptions::every_keyframe
   // off), in the extractions above and the snapshots.
-  const IncrementalSculptor::DeferredSmoothing smoothing = sculptor.DeferredSmoothingStats();
-  std::vector<double> ms;
+  const IncrementalSculptor::DeferredSmoothing smoothing = written.DeferredSmoothingStats();
+  std::vector<double> ms;  // the keyframes sculpted one step at a time (the stream's)
   size_t max_e = 0, added = 0, rejected = 0;
   for (const KeyframeStats& st : stats) {
     if (!st.batch) ms.push_back(MsPerKeyframe(st));
     max_e = std::max(max_e, st.cells_e);
+  }
+  for (const KeyframeStats& st : written_stats) {
     added += st.points_added;
     rejected += st.points_rejected;
   }
   size_t filtered[4] = {0, 0, 0, 0};
-  for (const KeyframeStats& st : stats) {
+  for (const KeyframeStats& st : written_stats) {
     filtered[0] += st.points_invalid;
     filtered[1] += st.points_filtered_ground;
     filtered[2] += st.points_filtered_length;
@@ -323,8 +348,14 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   std::printf(
       "surface: s = %.3f (keyframe spacing %.3f), r = %.2f, ground bound %.2f; points filtered "
       "(paper §5.1): %zu invalid, %zu below the ground, %zu too far, %zu narrow aperture\n",
-      sculptor.scale(), sculptor.keyframe_spacing(), sculptor.ray_length_bound(),
-      sculptor.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3]);
+      sculptor.scale(), sculptor.keyframe_spacing(), written.ray_length_bound(),
+      written.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3]);
+  if (batch_sculptor) {
+    std::printf(
+        "surface: the final batch of all %zu keyframes at that s: %.2f s (the surface written; "
+        "--no-final-batch keeps the one sculpted keyframe by keyframe)\n",
+        stream.size(), batch_seconds);
+  }
   const MeshCheckReport closed_report = CheckMesh(closed);
   MeshCheckOptions bounded;
   bounded.allow_boundary = true;
@@ -372,6 +403,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
         {"at_extraction_vertices", smoothing.vertices},
         {"at_extraction_seconds", smoothing.seconds}}},
       {"max_cells_e", max_e},
+      {"final_batch", {{"ran", batch_sculptor != nullptr}, {"seconds", batch_seconds}}},
       {"warnings", WarningsLogged()},
   };
   WriteTextFileAtomically(out / "surface.json", summary.dump(2) + "\n");
@@ -578,6 +610,11 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       ->add_option("--ray-grid-step", o->sculptor.ray_grid_step_factor,
                    "Voxel side of the grid of old rays (paper §4.4), in units of s")
       ->capture_default_str();
+  command->add_flag_callback(
+      "--no-final-batch", [o] { o->final_batch = false; },
+      "Write the surface sculpted keyframe by keyframe, not the final batch that sculpts every "
+      "keyframe again at once at the first keyframes' s (as reconstruct after its final "
+      "adjustment)");
   command->add_flag("--no-batch", o->no_batch,
                     "Sculpt the first keyframes one by one instead of in one batch (§5.1)");
   command->add_flag("--no-genus-refinement", o->no_genus_refinement,

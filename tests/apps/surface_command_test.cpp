@@ -105,11 +105,12 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
       Run({"--quiet", "synth", "--preset", "tiny", "--frames", "12", "--out", drive.string()});
   ASSERT_EQ(synth.exit_code, 0) << synth.err;
 
-  // Keyframes one by one (no batch), so that every keyframe has its own row.
+  // Keyframes one by one (no batch), so that every keyframe has its own row; the surface written
+  // is the one they sculpted (no final batch), so the last snapshot is that surface.
   const fs::path out = dir_->path() / "surface";
   const RunResult surface =
       Run({"--quiet", "surface", "--from-gt", drive.string(), "--out", out.string(), "--no-batch",
-           "--init-keyframes", "4", "--snapshot-every", "4"});
+           "--init-keyframes", "4", "--snapshot-every", "4", "--no-final-batch"});
   ASSERT_EQ(surface.exit_code, 0) << surface.out << surface.err;
   std::smatch match;
   ASSERT_TRUE(std::regex_search(surface.out, match, std::regex(R"(surface: (\d+) keyframes)")))
@@ -293,7 +294,8 @@ TEST_F(SurfaceCommandTest, SurfaceVerticesArePointsWithTheirColours) {
 }
 
 // Step 6: --no-genus-refinement and --no-smoothing switch each part off on the same
-// stream, --smooth-every-keyframe smooths in the keyframes instead of once at the end.
+// stream, --smooth-every-keyframe smooths in the keyframes instead of once at the end (the
+// surface sculpted keyframe by keyframe: no final batch).
 // Smoothing moves vertices only (same triangles, same vertex count); without refinement
 // no group is added and F ∩ E outside O is left as step 5 made it; each output is a closed
 // oriented 2-manifold.
@@ -306,7 +308,7 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
     const fs::path out = dir_->path() / name;
     std::vector<std::string> args = {
         "--quiet",       "surface", "--from-gt",  drive.string(),     "--out", out.string(),
-        "--point-noise", "0.05",    "--no-batch", "--init-keyframes", "4"};
+        "--point-noise", "0.05",    "--no-batch", "--init-keyframes", "4",     "--no-final-batch"};
     args.insert(args.end(), flags.begin(), flags.end());
     const RunResult r = Run(args);
     EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
@@ -364,6 +366,50 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
   EXPECT_EQ(sum(none, "genus_groups"), 0.0);
   EXPECT_EQ(sum(none, "genus_free_before"), sum(none, "genus_free_after"));
   EXPECT_LE(sum(full, "genus_free_after"), sum(full, "genus_free_before"));
+}
+
+// By default the surface written is the final batch: every keyframe sculpted again at once at
+// the first keyframes' s. It differs from the keyframe-by-keyframe surface (the last snapshot),
+// is a closed oriented manifold with its observed part inside it, and inserts every point the
+// stream kept (a batch rejects none: O is empty when its points go in).
+TEST_F(SurfaceCommandTest, TheFinalBatchIsTheSurfaceWrittenByDefault) {
+  const fs::path drive = dir_->path() / "drive";
+  ASSERT_EQ(Run({"--quiet", "synth", "--preset", "tiny", "--frames", "12", "--out", drive.string()})
+                .exit_code,
+            0);
+  auto run = [&](const std::string& name, std::vector<std::string> extra) {
+    const fs::path out = dir_->path() / name;
+    std::vector<std::string> args = {"--quiet", "surface",    "--from-gt",        drive.string(),
+                                     "--out",   out.string(), "--init-keyframes", "4"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const RunResult result = Run(args);
+    EXPECT_EQ(result.exit_code, 0) << result.err;
+    return out;
+  };
+  const fs::path batch = run("batch", {});
+  const fs::path stream = run("stream", {"--no-final-batch"});
+  const nlohmann::json batch_json = nlohmann::json::parse(ReadTextFile(batch / "surface.json"));
+  const nlohmann::json stream_json = nlohmann::json::parse(ReadTextFile(stream / "surface.json"));
+  EXPECT_TRUE(batch_json["final_batch"]["ran"].get<bool>());
+  EXPECT_FALSE(stream_json["final_batch"]["ran"].get<bool>());
+  // The stream's sculpting is the same in both runs: the same rows (times aside).
+  const std::vector<std::string> batch_rows =
+      Split(ReadTextFile(batch / "stats" / "keyframes.csv"), '\n');
+  const std::vector<std::string> stream_rows =
+      Split(ReadTextFile(stream / "stats" / "keyframes.csv"), '\n');
+  ASSERT_EQ(batch_rows.size(), stream_rows.size());
+  const TriangleMesh closed = ReadPlyMesh(batch / "surface_closed.ply");
+  const TriangleMesh stream_closed = ReadPlyMesh(stream / "surface_closed.ply");
+  const MeshCheckReport report = CheckMesh(closed);
+  EXPECT_TRUE(report.ok) << report.ToText();
+  EXPECT_NE(closed.triangles, stream_closed.triangles);
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  const TriangleMesh observed = ReadPlyMesh(batch / "surface.ply");
+  EXPECT_TRUE(CheckMesh(observed, bounded).ok);
+  ExpectTrianglesSubset(observed, closed);
+  EXPECT_EQ(batch_json["points_rejected"].get<size_t>(), 0u);
+  EXPECT_GE(batch_json["points_added"].get<size_t>(), stream_json["points_added"].get<size_t>());
 }
 
 TEST_F(SurfaceCommandTest, MissingDriveIsOneErrorLineAndExitCode2) {

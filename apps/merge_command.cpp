@@ -28,6 +28,7 @@
 #include "pipeline/colmap_keyframes.h"
 #include "pipeline/merge.h"
 #include "pipeline/point_colors.h"
+#include "pipeline/reconstruction.h"
 #include "surface/sculptor.h"
 
 namespace omni {
@@ -43,6 +44,9 @@ struct MergeCommandOptions {
   MergeOptions merge;
   std::string enclosing = EnclosingName(SculptorOptions().enclosing);
   SculptorOptions sculptor;
+  // --final-batch: the surface written is every keyframe sculpted again in one batch after the
+  // keyframe-by-keyframe sculpting (SculptInOneBatch), as `reconstruct` does.
+  bool final_batch = false;
 };
 
 double SecondsSince(Clock::time_point start) {
@@ -140,7 +144,16 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   }
   const std::vector<KeyframeStats> last_stats = sculptor.Finish();
   stats.insert(stats.end(), last_stats.begin(), last_stats.end());
-  ColoredSurfaces surfaces = ExtractColoredSurfaces(sculptor, point_colors);
+  std::unique_ptr<IncrementalSculptor> batch_sculptor;
+  std::vector<KeyframeStats> batch_stats;
+  double batch_seconds = 0.0;
+  if (o.final_batch && sculptor.scale() > 0.0 && SomeKeyframesSculptedOneStepAtATime(stats)) {
+    const auto batch_start = Clock::now();
+    batch_sculptor = SculptInOneBatch(o.sculptor, sculptor.scale(), stream, &batch_stats);
+    batch_seconds = SecondsSince(batch_start);
+  }
+  ColoredSurfaces surfaces =
+      ExtractColoredSurfaces(batch_sculptor ? *batch_sculptor : sculptor, point_colors);
   const TriangleMesh& closed = surfaces.closed;
   const TriangleMesh& mesh = surfaces.observed;
   if (!closed.triangles.empty()) {
@@ -246,6 +259,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
       {"points", cloud.points.size()},
       {"points_fused", merged.fused_points},
       {"keyframes", stream.size()},
+      {"final_batch", {{"ran", batch_sculptor != nullptr}, {"seconds", batch_seconds}}},
       {"triangles", mesh.triangles.size()},
       {"manifold", manifold.ok},
       {"closed_triangles", closed.triangles.size()},
@@ -298,6 +312,14 @@ void RegisterMergeCommand(CLI::App& app, const GlobalOptions& global) {
                    "surface_closed.ply, stats/, merge.json)")
       ->required();
   command->add_flag("--force", o->force, "Replace OUT if it holds a previous merge");
+  command
+      ->add_option("--init-keyframes", o->sculptor.init_keyframes,
+                   "Keyframes measuring s and sculpted in the first batch (paper §5.1); the "
+                   "later ones one step at a time")
+      ->capture_default_str();
+  command->add_flag("--final-batch", o->final_batch,
+                    "Write a final batch instead of the surface sculpted keyframe by keyframe: "
+                    "every keyframe sculpted again at once at the first keyframes' s");
   command
       ->add_option("--min-shared-frames", o->merge.min_shared_frames,
                    "An overlap is verified when at least this many shared frames agree with one "

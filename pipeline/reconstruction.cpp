@@ -66,6 +66,22 @@ SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mo
   return options;
 }
 
+std::unique_ptr<IncrementalSculptor> SculptInOneBatch(const SculptorOptions& base, double scale,
+                                                      const std::vector<SurfaceKeyframe>& keyframes,
+                                                      std::vector<KeyframeStats>* stats) {
+  auto sculptor = std::make_unique<IncrementalSculptor>(
+      ReplaySculptorOptions(base, LoopReplay::kBatch, scale, keyframes.size()));
+  for (const SurfaceKeyframe& keyframe : keyframes) {
+    for (const KeyframeStats& st : sculptor->AddKeyframe(keyframe)) stats->push_back(st);
+  }
+  for (const KeyframeStats& st : sculptor->Finish()) stats->push_back(st);
+  return sculptor;
+}
+
+bool SomeKeyframesSculptedOneStepAtATime(const std::vector<KeyframeStats>& stats) {
+  return std::any_of(stats.begin(), stats.end(), [](const KeyframeStats& st) { return !st.batch; });
+}
+
 namespace {
 
 using Clock = std::chrono::steady_clock;

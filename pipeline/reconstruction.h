@@ -7,6 +7,7 @@
 // again from it. The calling thread reports progress.
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -29,7 +30,11 @@ struct PipelineOptions {
   // The SfM (pipeline/sfm_runner.h): after a loop correction the surface thread replays the
   // sculptor on the corrected finalised keyframes (the keyframes queued meanwhile wait).
   SfmRunnerOptions sfm;
-  // The sculptor's defaults but for keyframes_per_step (DefaultSculptor).
+  // The surface sculpted three keyframes a step (SculptorOptions::keyframes_per_step): the final
+  // surface is sculpted again in one batch after the SfM's final adjustment (a corrected map),
+  // so the steps shape only the live surface, at about 0.7 of the surface thread's time
+  // (docs/figures.md F53).
+  static SculptorOptions DefaultSculptor();
   SculptorOptions sculptor = DefaultSculptor();
   LoopReplay loop_replay = LoopReplay::kBatch;
   // Keyframes waiting between the SfM and the surface threads; a full queue stalls the SfM
@@ -43,12 +48,7 @@ struct PipelineOptions {
   // queue; when both want a core the SfM gets it, and a surface that falls behind still gets the
   // cores whenever the SfM waits (a full queue, the end of the input). docs/figures.md F40.
   int surface_thread_nice = 10;
-  int snapshot_every = 0;  // snapshot callback every K sculpted keyframes; 0: none
-  // The surface sculpted three keyframes a step (SculptorOptions::keyframes_per_step): the final
-  // surface is sculpted again in one batch after the SfM's final adjustment (a corrected map),
-  // so the steps shape only the live surface, at about 0.7 of the surface thread's time
-  // (docs/figures.md F53).
-  static SculptorOptions DefaultSculptor();
+  int snapshot_every = 0;        // snapshot callback every K sculpted keyframes; 0: none
   double progress_period = 2.0;  // seconds between two progress callbacks
 
   std::string Check() const;
@@ -122,6 +122,16 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
 // all of them in one batch at that s, then one by one; otherwise `base` (s measured again).
 SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mode, double scale,
                                       size_t keyframes);
+
+// Every keyframe sculpted again in one batch at the scale s of an earlier sculpting of them
+// (ReplaySculptorOptions with kBatch), as the pipeline's replay after the SfM's final
+// adjustment: the final surface of `surface` and `merge`. Appends the batch's rows to *stats.
+// Worth it only when some keyframes were sculpted after the first batch
+// (SomeKeyframesSculptedOneStepAtATime of that sculpting's rows).
+std::unique_ptr<IncrementalSculptor> SculptInOneBatch(const SculptorOptions& base, double scale,
+                                                      const std::vector<SurfaceKeyframe>& keyframes,
+                                                      std::vector<KeyframeStats>* stats);
+bool SomeKeyframesSculptedOneStepAtATime(const std::vector<KeyframeStats>& stats);
 
 // KeyframeStatsCsvHeader() and the pipeline's columns (queue_ms).
 std::string PipelineKeyframesCsvHeader();

@@ -173,9 +173,10 @@ TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
   RunSegment(drive, "0:40", scratch / "a", scratch, "sfm");
   RunSegment(drive, "30:70", scratch / "b", scratch, "sfm");
   const fs::path city = scratch / "city";
-  const auto merged = RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(),
-                                     (scratch / "b").string(), "--out", city.string()},
-                                    scratch);
+  const auto merged =
+      RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(), (scratch / "b").string(),
+                     "--out", city.string(), "--final-batch"},
+                    scratch);
   ASSERT_EQ(merged.exit_code, 0) << merged.err;
   const nlohmann::json summary = ReadJson(city / "merge.json");
   EXPECT_EQ(summary["status"], "usable") << summary.dump(2);
@@ -193,6 +194,35 @@ TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
     EXPECT_EQ(ReadTextFile(city / file), ReadTextFile(city_again / file)) << file;
   }
   EXPECT_TRUE(fs::exists(city / "poses.tum"));
+  // --final-batch writes every keyframe sculpted again in one batch (here after a first batch
+  // of 10 and the others one by one), another closed surface of the same map than the one
+  // sculpted keyframe by keyframe (the default). Without --init-keyframes the map's keyframes
+  // are all in the first batch, and no final batch runs even when asked.
+  EXPECT_FALSE(summary["final_batch"]["ran"].get<bool>()) << summary.dump(2);
+  EXPECT_TRUE(summary["manifold"].get<bool>());
+  EXPECT_TRUE(summary["closed_manifold"].get<bool>());
+  ASSERT_GT(summary["keyframes"].get<int>(), 10);
+  const fs::path city_batch = scratch / "city_batch";
+  const auto batch =
+      RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(), (scratch / "b").string(),
+                     "--out", city_batch.string(), "--init-keyframes", "10", "--final-batch"},
+                    scratch);
+  ASSERT_EQ(batch.exit_code, 0) << batch.err;
+  const nlohmann::json batch_summary = ReadJson(city_batch / "merge.json");
+  EXPECT_TRUE(batch_summary["final_batch"]["ran"].get<bool>()) << batch_summary.dump(2);
+  EXPECT_TRUE(batch_summary["closed_manifold"].get<bool>());
+  const fs::path city_stream = scratch / "city_stream";
+  const auto stream =
+      RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(), (scratch / "b").string(),
+                     "--out", city_stream.string(), "--init-keyframes", "10"},
+                    scratch);
+  ASSERT_EQ(stream.exit_code, 0) << stream.err;
+  const nlohmann::json stream_summary = ReadJson(city_stream / "merge.json");
+  EXPECT_FALSE(stream_summary["final_batch"]["ran"].get<bool>());
+  EXPECT_TRUE(stream_summary["closed_manifold"].get<bool>());
+  EXPECT_EQ(stream_summary["keyframes"], summary["keyframes"]);
+  EXPECT_NE(ReadPlyMesh(city_stream / "surface_closed.ply").triangles,
+            ReadPlyMesh(city_batch / "surface_closed.ply").triangles);
 }
 
 // A drive with its own clock (frames.csv in epoch seconds with nanoseconds, as the real sets

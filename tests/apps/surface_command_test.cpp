@@ -105,12 +105,11 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
       Run({"--quiet", "synth", "--preset", "tiny", "--frames", "12", "--out", drive.string()});
   ASSERT_EQ(synth.exit_code, 0) << synth.err;
 
-  // Keyframes one by one (no batch), so that every keyframe has its own row; the surface written
-  // is the one they sculpted (no final batch), so the last snapshot is that surface.
+  // Keyframes one by one (no batch), so that every keyframe has its own row.
   const fs::path out = dir_->path() / "surface";
   const RunResult surface =
       Run({"--quiet", "surface", "--from-gt", drive.string(), "--out", out.string(), "--no-batch",
-           "--init-keyframes", "4", "--snapshot-every", "4", "--no-final-batch"});
+           "--init-keyframes", "4", "--snapshot-every", "4"});
   ASSERT_EQ(surface.exit_code, 0) << surface.out << surface.err;
   std::smatch match;
   ASSERT_TRUE(std::regex_search(surface.out, match, std::regex(R"(surface: (\d+) keyframes)")))
@@ -294,8 +293,7 @@ TEST_F(SurfaceCommandTest, SurfaceVerticesArePointsWithTheirColours) {
 }
 
 // Step 6: --no-genus-refinement and --no-smoothing switch each part off on the same
-// stream, --smooth-every-keyframe smooths in the keyframes instead of once at the end (the
-// surface sculpted keyframe by keyframe: no final batch).
+// stream, --smooth-every-keyframe smooths in the keyframes instead of once at the end.
 // Smoothing moves vertices only (same triangles, same vertex count); without refinement
 // no group is added and F ∩ E outside O is left as step 5 made it; each output is a closed
 // oriented 2-manifold.
@@ -308,7 +306,7 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
     const fs::path out = dir_->path() / name;
     std::vector<std::string> args = {
         "--quiet",       "surface", "--from-gt",  drive.string(),     "--out", out.string(),
-        "--point-noise", "0.05",    "--no-batch", "--init-keyframes", "4",     "--no-final-batch"};
+        "--point-noise", "0.05",    "--no-batch", "--init-keyframes", "4"};
     args.insert(args.end(), flags.begin(), flags.end());
     const RunResult r = Run(args);
     EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
@@ -368,11 +366,11 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
   EXPECT_LE(sum(full, "genus_free_after"), sum(full, "genus_free_before"));
 }
 
-// By default the surface written is the final batch: every keyframe sculpted again at once at
-// the first keyframes' s. It differs from the keyframe-by-keyframe surface (the last snapshot),
+// With --final-batch the surface written is every keyframe sculpted again at once at the first
+// keyframes' s. It differs from the keyframe-by-keyframe surface (the default),
 // is a closed oriented manifold with its observed part inside it, and inserts every point the
 // stream kept (a batch rejects none: O is empty when its points go in).
-TEST_F(SurfaceCommandTest, TheFinalBatchIsTheSurfaceWrittenByDefault) {
+TEST_F(SurfaceCommandTest, TheFinalBatchIsTheSurfaceWrittenWhenAsked) {
   const fs::path drive = dir_->path() / "drive";
   ASSERT_EQ(Run({"--quiet", "synth", "--preset", "tiny", "--frames", "12", "--out", drive.string()})
                 .exit_code,
@@ -386,8 +384,8 @@ TEST_F(SurfaceCommandTest, TheFinalBatchIsTheSurfaceWrittenByDefault) {
     EXPECT_EQ(result.exit_code, 0) << result.err;
     return out;
   };
-  const fs::path batch = run("batch", {});
-  const fs::path stream = run("stream", {"--no-final-batch"});
+  const fs::path batch = run("batch", {"--final-batch"});
+  const fs::path stream = run("stream", {});
   const nlohmann::json batch_json = nlohmann::json::parse(ReadTextFile(batch / "surface.json"));
   const nlohmann::json stream_json = nlohmann::json::parse(ReadTextFile(stream / "surface.json"));
   EXPECT_TRUE(batch_json["final_batch"]["ran"].get<bool>());

@@ -82,6 +82,16 @@ class SurfaceCommandTest : public ::testing::Test {
     return testing::RunOmnisculpt(arguments, dir_->path());
   }
 
+  // A `synth --preset tiny` drive of its first `frames` frames, made in dir_/name; empty when
+  // synth failed.
+  static fs::path TinyDrive(const std::string& name, int frames) {
+    const fs::path drive = dir_->path() / name;
+    const RunResult synth = Run({"--quiet", "synth", "--preset", "tiny", "--frames",
+                                 std::to_string(frames), "--out", drive.string()});
+    EXPECT_EQ(synth.exit_code, 0) << synth.err;
+    return synth.exit_code == 0 ? drive : fs::path();
+  }
+
   static testing::TempDir* dir_;
 };
 testing::TempDir* SurfaceCommandTest::dir_ = nullptr;
@@ -100,10 +110,8 @@ const char* const kColumns =
     "ms_enclosed_free,keyframes";
 
 TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPerKeyframe) {
-  const fs::path drive = dir_->path() / "drive";
-  const RunResult synth =
-      Run({"--quiet", "synth", "--preset", "tiny", "--frames", "12", "--out", drive.string()});
-  ASSERT_EQ(synth.exit_code, 0) << synth.err;
+  const fs::path drive = TinyDrive("drive", 12);
+  ASSERT_FALSE(drive.empty());
 
   // Keyframes one by one (no batch), so that every keyframe has its own row.
   const fs::path out = dir_->path() / "surface";
@@ -240,10 +248,8 @@ TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPe
 // surface_closed.ply that are not points are Steiner vertices, grey (the street test of
 // tests/surface/observed_mesh_test.cpp checks that δO has some).
 TEST_F(SurfaceCommandTest, SurfaceVerticesArePointsWithTheirColours) {
-  const fs::path drive = dir_->path() / "drive_colours";
-  ASSERT_EQ(Run({"--quiet", "synth", "--preset", "tiny", "--frames", "10", "--out", drive.string()})
-                .exit_code,
-            0);
+  const fs::path drive = TinyDrive("drive_colours", 10);
+  ASSERT_FALSE(drive.empty());
   const fs::path out = dir_->path() / "colours";
   const RunResult r = Run({"--quiet", "surface", "--from-gt", drive.string(), "--out", out.string(),
                            "--no-smoothing", "--init-keyframes", "4"});
@@ -298,10 +304,8 @@ TEST_F(SurfaceCommandTest, SurfaceVerticesArePointsWithTheirColours) {
 // no group is added and F ∩ E outside O is left as step 5 made it; each output is a closed
 // oriented 2-manifold.
 TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
-  const fs::path drive = dir_->path() / "drive6";
-  ASSERT_EQ(Run({"--quiet", "synth", "--preset", "tiny", "--frames", "10", "--out", drive.string()})
-                .exit_code,
-            0);
+  const fs::path drive = TinyDrive("drive6", 10);
+  ASSERT_FALSE(drive.empty());
   auto run = [&](const std::string& name, std::vector<std::string> flags) {
     const fs::path out = dir_->path() / name;
     std::vector<std::string> args = {
@@ -371,10 +375,8 @@ TEST_F(SurfaceCommandTest, StepSixSwitchesTurnEachPartOff) {
 // is a closed oriented manifold with its observed part inside it, and inserts every point the
 // stream kept (a batch rejects none: O is empty when its points go in).
 TEST_F(SurfaceCommandTest, TheFinalBatchIsTheSurfaceWrittenWhenAsked) {
-  const fs::path drive = dir_->path() / "drive";
-  ASSERT_EQ(Run({"--quiet", "synth", "--preset", "tiny", "--frames", "12", "--out", drive.string()})
-                .exit_code,
-            0);
+  const fs::path drive = TinyDrive("drive_final_batch", 12);
+  ASSERT_FALSE(drive.empty());
   auto run = [&](const std::string& name, std::vector<std::string> extra) {
     const fs::path out = dir_->path() / name;
     std::vector<std::string> args = {"--quiet", "surface",    "--from-gt",        drive.string(),

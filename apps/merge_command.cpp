@@ -45,7 +45,7 @@ struct MergeCommandOptions {
   std::string enclosing = EnclosingName(SculptorOptions().enclosing);
   SculptorOptions sculptor;
   // --final-batch: the surface written is every keyframe sculpted again in one batch after the
-  // keyframe-by-keyframe sculpting (SculptInOneBatch), as `reconstruct` does.
+  // keyframe-by-keyframe sculpting (SculptFinalBatch), as `reconstruct` does.
   bool final_batch = false;
 };
 
@@ -144,16 +144,10 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   }
   const std::vector<KeyframeStats> last_stats = sculptor.Finish();
   stats.insert(stats.end(), last_stats.begin(), last_stats.end());
-  std::unique_ptr<IncrementalSculptor> batch_sculptor;
-  std::vector<KeyframeStats> batch_stats;
-  double batch_seconds = 0.0;
-  if (o.final_batch && sculptor.scale() > 0.0 && SomeKeyframesSculptedOneStepAtATime(stats)) {
-    const auto batch_start = Clock::now();
-    batch_sculptor = SculptInOneBatch(o.sculptor, sculptor.scale(), stream, &batch_stats);
-    batch_seconds = SecondsSince(batch_start);
-  }
+  const FinalBatch batch =
+      o.final_batch ? SculptFinalBatch(o.sculptor, sculptor, stats, stream) : FinalBatch{};
   ColoredSurfaces surfaces =
-      ExtractColoredSurfaces(batch_sculptor ? *batch_sculptor : sculptor, point_colors);
+      ExtractColoredSurfaces(batch.sculptor ? *batch.sculptor : sculptor, point_colors);
   const TriangleMesh& closed = surfaces.closed;
   const TriangleMesh& mesh = surfaces.observed;
   if (!closed.triangles.empty()) {
@@ -259,7 +253,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
       {"points", cloud.points.size()},
       {"points_fused", merged.fused_points},
       {"keyframes", stream.size()},
-      {"final_batch", {{"ran", batch_sculptor != nullptr}, {"seconds", batch_seconds}}},
+      {"final_batch", {{"ran", batch.sculptor != nullptr}, {"seconds", batch.seconds}}},
       {"triangles", mesh.triangles.size()},
       {"manifold", manifold.ok},
       {"closed_triangles", closed.triangles.size()},

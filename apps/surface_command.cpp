@@ -288,21 +288,13 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     }
   }
   snapshot(sculptor.Finish());
-  // The final batch: a new sculptor takes every keyframe in one batch at the s just measured
-  // (SculptInOneBatch, as the pipeline's replay); its surface is the one written. Not when the
-  // stream was one batch already.
-  std::unique_ptr<IncrementalSculptor> batch_sculptor;
-  std::vector<KeyframeStats> batch_stats;
-  double batch_seconds = 0.0;
-  if (o.final_batch && sculptor.scale() > 0.0 && SomeKeyframesSculptedOneStepAtATime(stats)) {
-    const auto batch_start = std::chrono::steady_clock::now();
-    batch_sculptor = SculptInOneBatch(o.sculptor, sculptor.scale(), stream, &batch_stats);
-    batch_seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - batch_start).count();
-  }
-  const IncrementalSculptor& written = batch_sculptor ? *batch_sculptor : sculptor;
+  // --final-batch: every keyframe sculpted again in one batch (SculptFinalBatch); its surface is
+  // the one written.
+  const FinalBatch batch =
+      o.final_batch ? SculptFinalBatch(o.sculptor, sculptor, stats, stream) : FinalBatch{};
+  const IncrementalSculptor& written = batch.sculptor ? *batch.sculptor : sculptor;
   // The counts of the points of the surface written: the batch's, or the stream's.
-  const std::vector<KeyframeStats>& written_stats = batch_sculptor ? batch_stats : stats;
+  const std::vector<KeyframeStats>& written_stats = batch.sculptor ? batch.stats : stats;
 
   std::filesystem::create_directories(out / "stats");
   // The closed δO and its observed part, each vertex coloured as its point.
@@ -347,11 +339,11 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       "(paper §5.1): %zu invalid, %zu below the ground, %zu too far, %zu narrow aperture\n",
       sculptor.scale(), sculptor.keyframe_spacing(), written.ray_length_bound(),
       written.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3]);
-  if (batch_sculptor) {
+  if (batch.sculptor) {
     std::printf(
         "surface: the final batch of all %zu keyframes at that s: %.2f s (the surface "
         "written)\n",
-        stream.size(), batch_seconds);
+        stream.size(), batch.seconds);
   }
   const MeshCheckReport closed_report = CheckMesh(closed);
   MeshCheckOptions bounded;
@@ -400,7 +392,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
         {"at_extraction_vertices", smoothing.vertices},
         {"at_extraction_seconds", smoothing.seconds}}},
       {"max_cells_e", max_e},
-      {"final_batch", {{"ran", batch_sculptor != nullptr}, {"seconds", batch_seconds}}},
+      {"final_batch", {{"ran", batch.sculptor != nullptr}, {"seconds", batch.seconds}}},
       {"warnings", WarningsLogged()},
   };
   WriteTextFileAtomically(out / "surface.json", summary.dump(2) + "\n");

@@ -66,20 +66,22 @@ SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mo
   return options;
 }
 
-std::unique_ptr<IncrementalSculptor> SculptInOneBatch(const SculptorOptions& base, double scale,
-                                                      const std::vector<SurfaceKeyframe>& keyframes,
-                                                      std::vector<KeyframeStats>* stats) {
-  auto sculptor = std::make_unique<IncrementalSculptor>(
-      ReplaySculptorOptions(base, LoopReplay::kBatch, scale, keyframes.size()));
+FinalBatch SculptFinalBatch(const SculptorOptions& base, const IncrementalSculptor& streamed,
+                            const std::vector<KeyframeStats>& streamed_stats,
+                            const std::vector<SurfaceKeyframe>& keyframes) {
+  FinalBatch batch;
+  const bool incremental = std::any_of(streamed_stats.begin(), streamed_stats.end(),
+                                       [](const KeyframeStats& st) { return !st.batch; });
+  if (!(streamed.scale() > 0.0) || !incremental) return batch;
+  const auto start = std::chrono::steady_clock::now();
+  batch.sculptor = std::make_unique<IncrementalSculptor>(
+      ReplaySculptorOptions(base, LoopReplay::kBatch, streamed.scale(), keyframes.size()));
   for (const SurfaceKeyframe& keyframe : keyframes) {
-    for (const KeyframeStats& st : sculptor->AddKeyframe(keyframe)) stats->push_back(st);
+    for (const KeyframeStats& st : batch.sculptor->AddKeyframe(keyframe)) batch.stats.push_back(st);
   }
-  for (const KeyframeStats& st : sculptor->Finish()) stats->push_back(st);
-  return sculptor;
-}
-
-bool SomeKeyframesSculptedOneStepAtATime(const std::vector<KeyframeStats>& stats) {
-  return std::any_of(stats.begin(), stats.end(), [](const KeyframeStats& st) { return !st.batch; });
+  for (const KeyframeStats& st : batch.sculptor->Finish()) batch.stats.push_back(st);
+  batch.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return batch;
 }
 
 namespace {

@@ -123,15 +123,19 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
 SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mode, double scale,
                                       size_t keyframes);
 
-// Every keyframe sculpted again in one batch at the scale s of an earlier sculpting of them
-// (ReplaySculptorOptions with kBatch), as the pipeline's replay after the SfM's final
-// adjustment: the final surface of `surface` and `merge`. Appends the batch's rows to *stats.
-// Worth it only when some keyframes were sculpted after the first batch
-// (SomeKeyframesSculptedOneStepAtATime of that sculpting's rows).
-std::unique_ptr<IncrementalSculptor> SculptInOneBatch(const SculptorOptions& base, double scale,
-                                                      const std::vector<SurfaceKeyframe>& keyframes,
-                                                      std::vector<KeyframeStats>* stats);
-bool SomeKeyframesSculptedOneStepAtATime(const std::vector<KeyframeStats>& stats);
+// The final batch of `surface --final-batch` and `merge --final-batch`: every keyframe sculpted
+// again in one batch at the scale s that `streamed` measured on them (ReplaySculptorOptions with
+// kBatch), as the pipeline's replay after the SfM's final adjustment. Not run (sculptor null)
+// when `streamed` has no s or sculpted every keyframe in its first batch (no row of
+// `streamed_stats` is incremental): that batch is the surface already.
+struct FinalBatch {
+  std::unique_ptr<IncrementalSculptor> sculptor;
+  std::vector<KeyframeStats> stats;  // the batch's rows
+  double seconds = 0.0;
+};
+FinalBatch SculptFinalBatch(const SculptorOptions& base, const IncrementalSculptor& streamed,
+                            const std::vector<KeyframeStats>& streamed_stats,
+                            const std::vector<SurfaceKeyframe>& keyframes);
 
 // KeyframeStatsCsvHeader() and the pipeline's columns (queue_ms).
 std::string PipelineKeyframesCsvHeader();

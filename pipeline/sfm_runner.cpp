@@ -549,9 +549,10 @@ SfmRunResult RunSfm(const Rig& rig, const SfmFrameSource& source, const SfmRunne
     const size_t first = static_cast<size_t>(options.first_frame);
     FramePrefetcher::Prepare detect;
     if (options.detect_ahead) {
-      detect = [harris =
-                    FrontEndHarrisOptions(SfmFrontEndOptions(options))](PrefetchedFrame* frame) {
-        frame->corners = DetectFrameCorners(frame->images, harris);
+      const TrackBuilderOptions front_end = SfmFrontEndOptions(options);
+      detect = [harris = FrontEndHarrisOptions(front_end),
+                half_window = front_end.zncc.half_window](PrefetchedFrame* frame) {
+        frame->corners = DetectFrameCorners(frame->images, harris, half_window);
       };
     }
     FramePrefetcher prefetcher(

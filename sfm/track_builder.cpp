@@ -71,18 +71,23 @@ HarrisOptions FrontEndHarrisOptions(const TrackBuilderOptions& options) {
   return harris;
 }
 
-FrameCorners DetectFrameCorners(const std::vector<cv::Mat>& images, const HarrisOptions& options) {
+FrameCorners DetectFrameCorners(const std::vector<cv::Mat>& images, const HarrisOptions& options,
+                                int zncc_half_window) {
   const auto start = std::chrono::steady_clock::now();
   const int num_cameras = static_cast<int>(images.size());
   FrameCorners detected;
   detected.prepared.resize(num_cameras);
   detected.corners.resize(num_cameras);
   detected.pool_begin.resize(num_cameras, 0);
+  if (zncc_half_window > 0) detected.windows.resize(num_cameras);
   tbb::parallel_for(0, num_cameras, [&](int c) {
     detected.prepared[c] = PrepareImage(images[c], options);
     for (const Corner& corner :
          DetectHarrisCorners(detected.prepared[c], options, &detected.pool_begin[c]))
       detected.corners[c].push_back(corner.pixel);
+    if (zncc_half_window > 0)
+      detected.windows[c] =
+          ComputeCornerWindows(detected.prepared[c], detected.corners[c], zncc_half_window);
   });
   detected.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -96,7 +101,8 @@ TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
                                 " images for a rig of " + std::to_string(rig_.NumCameras()) +
                                 " cameras");
   }
-  FrameCorners detected = DetectFrameCorners(images, FrontEndHarrisOptions(options_));
+  FrameCorners detected =
+      DetectFrameCorners(images, FrontEndHarrisOptions(options_), options_.zncc.half_window);
   timings_.detect += detected.seconds;
   return AddCorners(std::move(detected), predict);
 }
@@ -108,6 +114,10 @@ TrackedFrame TrackBuilder::AddDetectedFrame(FrameCorners detected, const PixelPr
         "TrackBuilder::AddDetectedFrame: corners of " + std::to_string(detected.prepared.size()) +
         " cameras for a rig of " + std::to_string(rig_.NumCameras()) + " cameras");
   }
+  if (!detected.windows.empty() && detected.windows.size() != rig_.NumCameras())
+    throw std::invalid_argument("TrackBuilder::AddDetectedFrame: windows of " +
+                                std::to_string(detected.windows.size()) + " cameras for a rig of " +
+                                std::to_string(rig_.NumCameras()) + " cameras");
   timings_.detect_ahead += detected.seconds;
   return AddCorners(std::move(detected), predict);
 }
@@ -163,7 +173,8 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
     const CameraState& source = sources[c];
     if (source.corners.empty() || corners[c].empty()) return;
     matches[c] = MatchZncc(source.prepared, source.corners, regions[c], prepared[c], corners[c],
-                           options_.zncc, pool_begin[c]);
+                           options_.zncc, pool_begin[c],
+                           detected.windows.empty() ? nullptr : &detected.windows[c]);
   });
 
   for (int c = 0; c < num_cameras; ++c) {

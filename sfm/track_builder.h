@@ -90,11 +90,17 @@ struct FrameCorners {
   std::vector<std::vector<Eigen::Vector2d>> corners;  // one list per camera
   // Per camera: where the pool begins in its list (its size without a pool).
   std::vector<size_t> pool_begin;
+  // Per camera: the corners' ZNCC windows (ComputeCornerWindows), when DetectFrameCorners was
+  // given the matching's half window; empty otherwise (the matching computes them).
+  std::vector<CornerWindows> windows;
   double seconds = 0.0;  // wall time of the detection
 };
 
-// The cameras detected in parallel (TBB).
-FrameCorners DetectFrameCorners(const std::vector<cv::Mat>& images, const HarrisOptions& options);
+// The cameras detected in parallel (TBB). zncc_half_window > 0: the corners' ZNCC windows too
+// (TrackBuilderOptions::zncc.half_window), so that the matching does not compute them: done on
+// the thread that detects ahead, they leave the tracking thread.
+FrameCorners DetectFrameCorners(const std::vector<cv::Mat>& images, const HarrisOptions& options,
+                                int zncc_half_window = 0);
 
 // Input-image pixel where `track` should appear in camera `camera` of the new frame (its map
 // point projected by the predicted pose); false when there is no prediction.

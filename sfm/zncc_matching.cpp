@@ -4,6 +4,7 @@
 #include <cassert>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include "calib/error.h"
 
@@ -206,6 +207,20 @@ bool NormalisedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int ha
   return true;
 }
 
+CornerWindows ComputeCornerWindows(const cv::Mat& image,
+                                   const std::vector<Eigen::Vector2d>& corners, int half_window) {
+  if (half_window < 1) throw std::invalid_argument("ComputeCornerWindows: half_window below 1");
+  CornerWindows windows;
+  windows.half_window = half_window;
+  windows.area = (2 * half_window + 1) * (2 * half_window + 1);
+  windows.values.resize(corners.size() * windows.area);
+  windows.valid.assign(corners.size(), 0);
+  for (size_t k = 0; k < corners.size(); ++k)
+    windows.valid[k] =
+        NormalisedWindow(image, corners[k], half_window, windows.values.data() + k * windows.area);
+  return windows;
+}
+
 bool IsDistinctZncc(double best, double second, double max_distance_ratio) {
   if (second <= BestTwoZncc::kNone) return true;
   return std::sqrt(std::max(0.0, 1.0 - best)) <
@@ -239,21 +254,33 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
                                  const std::vector<Eigen::Vector2d>& corners1,
                                  const std::vector<SearchRegion>& regions, const cv::Mat& image2,
                                  const std::vector<Eigen::Vector2d>& corners2,
-                                 const ZnccOptions& options, size_t pool_begin) {
+                                 const ZnccOptions& options, size_t pool_begin,
+                                 const CornerWindows* windows2) {
   ThrowIfInvalid(options.Check(), "ZnccOptions");
   assert(regions.size() == corners1.size());
   assert(image1.type() == CV_8UC1 && image2.type() == CV_8UC1);
   MatchBuffers& buffers = ThreadBuffers();
   const int area = (2 * options.half_window + 1) * (2 * options.half_window + 1);
   WindowSet& windows1 = buffers.windows1;
-  WindowSet& windows2 = buffers.windows2;
   windows1.Reset(corners1.size(), area);
-  windows2.Reset(corners2.size(), area);
   for (size_t i = 0; i < corners1.size(); ++i)
     if (regions[i].radius >= 0.0)
       windows1.valid[i] = NormalisedWindow(image1, corners1[i], options.half_window, windows1[i]);
-  for (size_t j = 0; j < corners2.size(); ++j)
-    windows2.valid[j] = NormalisedWindow(image2, corners2[j], options.half_window, windows2[j]);
+  if (windows2 != nullptr) {
+    if (windows2->half_window != options.half_window || windows2->area != area ||
+        windows2->valid.size() != corners2.size() ||
+        windows2->values.size() != corners2.size() * static_cast<size_t>(area))
+      throw std::invalid_argument("MatchZncc: windows2 are not the windows of corners2");
+  } else {
+    WindowSet& computed = buffers.windows2;
+    computed.Reset(corners2.size(), area);
+    for (size_t j = 0; j < corners2.size(); ++j)
+      computed.valid[j] = NormalisedWindow(image2, corners2[j], options.half_window, computed[j]);
+  }
+  const std::vector<char>& valid2 = windows2 ? windows2->valid : buffers.windows2.valid;
+  auto window2 = [&](int j) {
+    return windows2 ? (*windows2)[j] : static_cast<const WindowSet&>(buffers.windows2)[j];
+  };
   const CornerGrid grid(corners2, image2.size(), kGridCell);
 
   // Best and second best score for each corner of the first image; best for each corner of
@@ -270,9 +297,9 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
     const double radius_squared = regions[i].radius * regions[i].radius;
     grid.Near(regions[i].center, regions[i].radius, &near);
     for (const int j : near) {
-      if (!windows2.valid[j]) continue;
+      if (!valid2[j]) continue;
       if ((corners2[j] - regions[i].center).squaredNorm() > radius_squared) continue;
-      const double score = Dot(windows1[i], windows2[j], area);
+      const double score = Dot(windows1[i], window2(j), area);
       if (score > score1[i]) {
         second1[i] = score1[i];
         score1[i] = score;

@@ -84,14 +84,29 @@ bool NormalisedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int ha
 double Zncc(const cv::Mat& image1, const Eigen::Vector2d& pixel1, const cv::Mat& image2,
             const Eigen::Vector2d& pixel2, int half_window);
 
+// The normalised windows (NormalisedWindow) of an image's corners, computed once: the window of
+// corner k at values[k · area], valid[k] false where NormalisedWindow failed. A caller may
+// compute them ahead, on another thread, for MatchZncc's second image.
+struct CornerWindows {
+  int half_window = 0;
+  int area = 0;
+  std::vector<float> values;
+  std::vector<char> valid;
+  const float* operator[](size_t k) const { return values.data() + k * area; }
+};
+CornerWindows ComputeCornerWindows(const cv::Mat& image,
+                                   const std::vector<Eigen::Vector2d>& corners, int half_window);
+
 // corners1/corners2 are pixels of the prepared (grey 8-bit) images; regions has one entry per
 // corner of the first image. Each corner appears in at most one match. The corners2 from
-// pool_begin on are a pool (ZnccOptions::min_zncc_pool).
+// pool_begin on are a pool (ZnccOptions::min_zncc_pool). windows2: the windows of corners2
+// (ComputeCornerWindows with options.half_window) when computed beforehand; the same matches.
 std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
                                  const std::vector<Eigen::Vector2d>& corners1,
                                  const std::vector<SearchRegion>& regions, const cv::Mat& image2,
                                  const std::vector<Eigen::Vector2d>& corners2,
                                  const ZnccOptions& options,
-                                 size_t pool_begin = std::numeric_limits<size_t>::max());
+                                 size_t pool_begin = std::numeric_limits<size_t>::max(),
+                                 const CornerWindows* windows2 = nullptr);
 
 }  // namespace omni

@@ -172,6 +172,11 @@ TEST(TrackBuilder, AFrameWithTheWrongNumberOfImagesThrows) {
   EXPECT_THROW(builder.AddFrame(one_image), std::invalid_argument);
   EXPECT_THROW(builder.AddDetectedFrame(DetectFrameCorners(one_image, HarrisOptions())),
                std::invalid_argument);
+  // Two images, but the ZNCC windows of one camera only.
+  const std::vector<cv::Mat> two_images = {one_image[0], one_image[0]};
+  FrameCorners detected = DetectFrameCorners(two_images, HarrisOptions(), 5);
+  detected.windows.pop_back();
+  EXPECT_THROW(builder.AddDetectedFrame(std::move(detected)), std::invalid_argument);
 }
 
 // The corners detected beforehand (DetectFrameCorners, as the SfM loop does on its prefetch
@@ -189,7 +194,10 @@ TEST(TrackBuilder, CornersDetectedAheadGiveTheSameFrames) {
     for (int c = 0; c < 2; ++c)
       images.push_back(MakeSyntheticTexture(400, 300, f * shifts[c], 250, 30 + c));
     const TrackedFrame a = itself.AddFrame(images);
-    FrameCorners detected = DetectFrameCorners(images, FrontEndHarrisOptions(options));
+    // Half the frames with their ZNCC windows computed ahead too, half without.
+    FrameCorners detected = DetectFrameCorners(images, FrontEndHarrisOptions(options),
+                                               f % 2 == 0 ? options.zncc.half_window : 0);
+    ASSERT_EQ(detected.windows.size(), f % 2 == 0 ? 2u : 0u);
     ASSERT_EQ(detected.prepared.size(), 2u);
     EXPECT_EQ(detected.prepared[0].cols, 267);  // 400 / 1.5
     const TrackedFrame b = ahead.AddDetectedFrame(std::move(detected));

@@ -133,6 +133,45 @@ TEST(ZnccMatching, SameMatchesAsBruteForce) {
   }
 }
 
+// The second image's windows computed beforehand (ComputeCornerWindows, as the front end does
+// on the thread that detects ahead) give the same matches to the last bit; windows of other
+// corners are refused.
+TEST(ZnccMatching, WindowsComputedAheadGiveTheSameMatches) {
+  const cv::Mat image1 = MakeSyntheticTexture(320, 240, Eigen::Vector2d::Zero(), 200, 13);
+  const cv::Mat image2 = MakeSyntheticTexture(320, 240, Eigen::Vector2d(4.2, -1.6), 200, 13);
+  HarrisOptions harris;
+  const std::vector<Eigen::Vector2d> corners1 = Pixels(DetectHarrisCorners(image1, harris));
+  std::vector<Eigen::Vector2d> corners2 = Pixels(DetectHarrisCorners(image2, harris));
+  corners2.push_back({2.0, 2.0});  // a window that leaves the image: not valid
+  std::vector<SearchRegion> regions;
+  for (const Eigen::Vector2d& corner : corners1)
+    regions.push_back({corner + Eigen::Vector2d(4.0, -2.0), 10.0});
+  const ZnccOptions options;
+  const size_t pool_begin = corners2.size() / 2;
+  const CornerWindows windows2 = ComputeCornerWindows(image2, corners2, options.half_window);
+  EXPECT_FALSE(windows2.valid.back());
+  const std::vector<ZnccMatch> computed =
+      MatchZncc(image1, corners1, regions, image2, corners2, options, pool_begin);
+  const std::vector<ZnccMatch> ahead =
+      MatchZncc(image1, corners1, regions, image2, corners2, options, pool_begin, &windows2);
+  ASSERT_GT(computed.size(), 50u);
+  ASSERT_EQ(ahead.size(), computed.size());
+  for (size_t k = 0; k < computed.size(); ++k) {
+    EXPECT_EQ(ahead[k].index1, computed[k].index1);
+    EXPECT_EQ(ahead[k].index2, computed[k].index2);
+    EXPECT_EQ(ahead[k].zncc, computed[k].zncc);
+    EXPECT_EQ(ahead[k].pixel2, computed[k].pixel2);
+  }
+  const CornerWindows fewer = ComputeCornerWindows(
+      image2, std::vector<Eigen::Vector2d>(corners2.begin(), corners2.end() - 1),
+      options.half_window);
+  EXPECT_THROW(MatchZncc(image1, corners1, regions, image2, corners2, options, pool_begin, &fewer),
+               std::invalid_argument);
+  const CornerWindows wider = ComputeCornerWindows(image2, corners2, options.half_window + 1);
+  EXPECT_THROW(MatchZncc(image1, corners1, regions, image2, corners2, options, pool_begin, &wider),
+               std::invalid_argument);
+}
+
 class ZnccShiftTest : public ::testing::TestWithParam<Eigen::Vector2d> {};
 
 TEST_P(ZnccShiftTest, FindsKnownShift) {

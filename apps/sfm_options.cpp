@@ -37,6 +37,11 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "strongest others, up to --corners (1: none; default 0: 2 in non-central "
                    "mode, 1 in central mode)")
       ->capture_default_str();
+  command->add_flag(
+      "--no-frame-points{false}", o->sfm.tracker.frame_points,
+      "No frame points: the tracks that end between two keyframes give the surface nothing "
+      "(default: triangulated from the tracked frames' poses and handed to the surface and "
+      "points.ply, not to the map)");
   command
       ->add_option("--min-tracked-share", o->sfm.tracker.keyframes.min_tracked_share,
                    "Keyframe once fewer of the last keyframe's points are tracked")

@@ -60,16 +60,36 @@ std::vector<Rgb8> ColorPoints(const Rig& rig, const std::vector<FinalizedKeyfram
   size_t num_points = 0;
   for (const FinalizedKeyframe& keyframe : keyframes) {
     for (const FinalizedPoint& point : keyframe.points) {
+      auto add_sample = [&](int frame, int camera, const Eigen::Vector2d& pixel) {
+        const long key = static_cast<long>(frame) * num_cameras + camera;
+        auto [it, inserted] = image_of.emplace(key, images.size());
+        if (inserted) images.push_back({frame, camera, {}, {}});
+        images[it->second].samples.push_back({num_points, pixel});
+      };
       for (const FinalizedRay& ray : point.rays) {
         const auto frame = frame_of.find(ray.keyframe);
         if (frame == frame_of.end() || ray.camera < 0 || ray.camera >= num_cameras) continue;
         const Camera& camera = rig.cameras[ray.camera];
         Eigen::Vector2d pixel;
         if (!camera.Project(ray.bearing, &pixel) || !camera.IsInImage(pixel)) continue;
-        const long key = static_cast<long>(frame->second) * num_cameras + ray.camera;
-        auto [it, inserted] = image_of.emplace(key, images.size());
-        if (inserted) images.push_back({frame->second, ray.camera, {}, {}});
-        images[it->second].samples.push_back({num_points, pixel});
+        add_sample(frame->second, ray.camera, pixel);
+      }
+      // A frame point (no keyframe ray): where it projects in the images of the keyframe it
+      // came with, by the cameras of its frame rays (the frames' own images are not read).
+      if (point.frame_point) {
+        const Rigid3d rig_from_world = keyframe.world_from_rig.Inverse();
+        std::vector<int> cameras;
+        for (const FinalizedFrameRay& ray : point.frame_rays)
+          if (ray.camera >= 0 && ray.camera < num_cameras &&
+              std::find(cameras.begin(), cameras.end(), ray.camera) == cameras.end())
+            cameras.push_back(ray.camera);
+        for (const int c : cameras) {
+          const Camera& camera = rig.cameras[c];
+          Eigen::Vector2d pixel;
+          if (camera.Project(camera.cam_from_rig * (rig_from_world * point.position), &pixel) &&
+              camera.IsInImage(pixel))
+            add_sample(keyframe.frame, c, pixel);
+        }
       }
       ++num_points;
     }

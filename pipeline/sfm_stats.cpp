@@ -72,6 +72,7 @@ std::string SfmSummaryCsv(const SfmStats& s) {
       << "median_track_keyframes," << s.tracks.median_keyframes << '\n'
       << "mean_rays_per_point," << s.tracks.mean_rays << '\n'
       << "mean_frame_rays_per_point," << s.tracks.mean_frame_rays << '\n'
+      << "frame_points," << s.tracks.frame_points << '\n'
       << "multi_camera_points_share," << s.tracks.multi_camera_share << '\n'
       << "aperture_ok_share," << s.tracks.aperture_ok_share << '\n'
       << "frames_per_second," << s.frames / std::max(s.total_seconds, 1e-9) << '\n'

@@ -197,6 +197,19 @@ struct Tracker::Impl {
     std::vector<TrackObservation> observations;
   };
   std::deque<RecentFrame> recent_frames;
+  // TrackerOptions::frame_points: each one's observations (frame stamp, observation) and the
+  // keyframe it is handed over with (the last keyframe before its frames).
+  struct FramePoint {
+    int keyframe;
+    std::vector<std::pair<int, TrackObservation>> observations;
+  };
+  std::vector<FramePoint> frame_points;
+  std::vector<std::vector<int>> frame_points_by_keyframe;  // indices into frame_points
+  std::unordered_set<int> frame_point_tracks;
+  // Frame points from the recorded frames' tracks that ended before `keyframe`.
+  void MakeFramePoints(int keyframe);
+  // A frame point's rays from its frames' current poses.
+  std::vector<WorldRay> FramePointRays(const FramePoint& point) const;
   int tracked_since_keyframe = 0;
   // Motion model: the last two tracked frames (frame index, world_from_rig), and the distance
   // travelled over the tracked steps so far.
@@ -332,6 +345,9 @@ struct Tracker::Impl {
     pending.clear();
     frame_stamps.clear();
     recent_frames.clear();
+    frame_points.clear();
+    frame_points_by_keyframe.clear();
+    frame_point_tracks.clear();
     kept_observations.clear();
   }
   // The first keyframe of the triangulation window of keyframe k.
@@ -1020,12 +1036,67 @@ void Tracker::Impl::TriangulateNewPoints(int keyframe) {
           AddPoint(observation.track, position, keyframe, std::move(track_observations));
   }
   AddRecentFrameRays(new_tracks);
+  if (options.frame_points) MakeFramePoints(keyframe);
   // The recorded frames before the next keyframe's window are of no further use.
   const int next_window_begin = TriangulationWindowBegin(keyframe + 1);
   while (!recent_frames.empty() &&
          frame_stamps[recent_frames.front().stamp].keyframe < next_window_begin)
     recent_frames.pop_front();
   AddSeconds(start, &timings.triangulate);
+}
+
+void Tracker::Impl::MakeFramePoints(int keyframe) {
+  if (keyframe < 1) return;
+  // The tracks that ended since the keyframe before: seen by it or by a recorded frame after
+  // it, not by this keyframe, without a point. (One that ended earlier was looked at then.)
+  std::unordered_set<int> seen_by_keyframe;
+  for (const TrackObservation& o : keyframes[keyframe].observations)
+    seen_by_keyframe.insert(o.track);
+  std::unordered_map<int, std::vector<std::pair<int, TrackObservation>>> by_track;
+  auto consider = [&](const TrackObservation& o) {
+    if (!seen_by_keyframe.count(o.track) && !track_to_point.Contains(o.track) &&
+        !frame_point_tracks.count(o.track))
+      by_track.try_emplace(o.track);
+  };
+  for (const TrackObservation& o : keyframes[keyframe - 1].observations) consider(o);
+  for (auto recent = recent_frames.rbegin(); recent != recent_frames.rend(); ++recent) {
+    if (frame_stamps[recent->stamp].keyframe != keyframe - 1) break;
+    for (const TrackObservation& o : recent->observations) consider(o);
+  }
+  if (by_track.empty()) return;
+  // All their observations in the recorded frames, oldest first.
+  for (const RecentFrame& recent : recent_frames)
+    for (const TrackObservation& o : recent.observations) {
+      const auto it = by_track.find(o.track);
+      if (it != by_track.end()) it->second.emplace_back(recent.stamp, o);
+    }
+  std::vector<int> tracks;  // in track order: the points' order does not depend on hashing
+  tracks.reserve(by_track.size());
+  for (const auto& entry : by_track) tracks.push_back(entry.first);
+  std::sort(tracks.begin(), tracks.end());
+  for (const int track : tracks) {
+    std::vector<std::pair<int, TrackObservation>>& observations = by_track[track];
+    if (observations.size() < 2) continue;
+    FramePoint point{-1, std::move(observations)};
+    for (const auto& [stamp, o] : point.observations)
+      point.keyframe = std::max(point.keyframe, frame_stamps[stamp].keyframe);
+    Eigen::Vector3d position;
+    if (TriangulatePoint(FramePointRays(point), options.triangulation, &position) !=
+        TriangulationStatus::kOk)
+      continue;
+    frame_point_tracks.insert(track);
+    if (static_cast<int>(frame_points_by_keyframe.size()) <= point.keyframe)
+      frame_points_by_keyframe.resize(point.keyframe + 1);
+    frame_points_by_keyframe[point.keyframe].push_back(static_cast<int>(frame_points.size()));
+    frame_points.push_back(std::move(point));
+  }
+}
+
+std::vector<WorldRay> Tracker::Impl::FramePointRays(const FramePoint& point) const {
+  std::vector<WorldRay> rays;
+  for (const auto& [stamp, o] : point.observations)
+    rays.push_back(Ray(FrameStampPose(frame_stamps[stamp]), o.camera, o.bearing));
+  return rays;
 }
 
 void Tracker::Impl::LocalBundleAdjustment() {
@@ -1127,6 +1198,26 @@ FinalizedKeyframe Tracker::Impl::MakeFinalized(int k, const std::vector<int>& ha
         directions.push_back(direction);
       }
       finalized_point.frame_rays.push_back({stamp.keyframe, stamp.frame, o.camera, center});
+    }
+    event.points.push_back(std::move(finalized_point));
+  }
+  // The frame points of the frames after k, triangulated from their frames' poses now (they
+  // follow the keyframes' corrections); the checks are those they passed when made, but a
+  // correction may have bent their rays apart: then they are left out.
+  const std::vector<int> none;
+  for (const int f :
+       k < static_cast<int>(frame_points_by_keyframe.size()) ? frame_points_by_keyframe[k] : none) {
+    const FramePoint& frame_point = frame_points[f];
+    FinalizedPoint finalized_point;
+    finalized_point.point = kFramePointIdBase + f;
+    finalized_point.frame_point = true;
+    if (TriangulatePoint(FramePointRays(frame_point), options.triangulation,
+                         &finalized_point.position) != TriangulationStatus::kOk)
+      continue;
+    for (const auto& [stamp, o] : frame_point.observations) {
+      const FrameStamp& frame_stamp = frame_stamps[stamp];
+      finalized_point.frame_rays.push_back({frame_stamp.keyframe, frame_stamp.frame, o.camera,
+                                            FrameStampPose(frame_stamp) * CenterInRig(o.camera)});
     }
     event.points.push_back(std::move(finalized_point));
   }
@@ -1328,6 +1419,9 @@ FrameResult Tracker::Impl::InitialiseOverStereoMap(
   std::vector<int> stereo_stamp = point_stamp;
   std::vector<FrameStamp> stereo_frame_stamps = frame_stamps;
   std::deque<RecentFrame> stereo_recent_frames = recent_frames;
+  std::vector<FramePoint> stereo_frame_points = frame_points;
+  std::vector<std::vector<int>> stereo_frame_points_by_keyframe = frame_points_by_keyframe;
+  std::unordered_set<int> stereo_frame_point_tracks = frame_point_tracks;
   const std::string stereo_scale_source = scale_source;
   ClearPoints();
   map_from_stereo = false;
@@ -1339,6 +1433,9 @@ FrameResult Tracker::Impl::InitialiseOverStereoMap(
     point_stamp = std::move(stereo_stamp);
     frame_stamps = std::move(stereo_frame_stamps);
     recent_frames = std::move(stereo_recent_frames);
+    frame_points = std::move(stereo_frame_points);
+    frame_points_by_keyframe = std::move(stereo_frame_points_by_keyframe);
+    frame_point_tracks = std::move(stereo_frame_point_tracks);
     map_from_stereo = true;
     metric_scale = true;
     scale_source = stereo_scale_source;
@@ -1788,6 +1885,10 @@ TrackStats ComputeTrackStats(const std::vector<FinalizedKeyframe>& keyframes, do
   const double max_cos = std::cos(min_aperture);
   for (const FinalizedKeyframe& keyframe : keyframes)
     for (const FinalizedPoint& point : keyframe.points) {
+      if (point.frame_point) {
+        ++stats.frame_points;
+        continue;
+      }
       std::vector<int> seen_keyframes;
       std::vector<Eigen::Vector3d> directions;
       bool two_cameras = false;

@@ -173,6 +173,16 @@ struct TrackerOptions {
   // order; radians, 0: all of them). Closer rays carve nearly the same cells (docs/figures.md
   // F34: 1 degree keeps the surface's figures with a fifth fewer rays).
   double frame_ray_min_angle = 1.0 * M_PI / 180.0;
+  // Frame points, for the surface only: at each keyframe, the tracks without a map point that
+  // the frames recorded for frame_ray_step saw and that ended before it (not seen by the
+  // keyframe) are triangulated from those frames' poses (`triangulation`'s checks), and handed
+  // over with the keyframe before their frames, flagged FinalizedPoint::frame_point, their
+  // rays the frames' rays. They are not in the map: no adjustment, resection or search sees
+  // them, so they cost the SfM a triangulation each; they are triangulated again from the
+  // frames' poses whenever the keyframes are handed over (after a correction, the frames
+  // follow their keyframes). Without them, a track that lives between two keyframes gives the
+  // surface nothing: most tracks do (figures.md F56). Needs frame_ray_step > 0.
+  bool frame_points = true;
   // Each tracked frame that is not a keyframe keeps its observations of map points (the
   // resection's inliers and the agreeing re-observations), so that RefineFramePose can pose it
   // again against the map as it is later (after the final adjustment). false: none kept.
@@ -236,7 +246,11 @@ struct FinalizedPoint {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
   std::vector<FinalizedRay> rays;             // keyframes (sparse/, colours, the surface)
   std::vector<FinalizedFrameRay> frame_rays;  // tracked frames between them (the surface)
+  // A frame point (TrackerOptions::frame_points): no keyframe ray, not in the map; `point` is
+  // kFramePointIdBase + its index among the frame points.
+  bool frame_point = false;
 };
+constexpr int kFramePointIdBase = 1 << 30;
 // A keyframe that left the adjustment window: its pose and points no longer move (docs/design.md
 // §7: the keyframe handed to the surface).
 struct FinalizedKeyframe {
@@ -248,8 +262,10 @@ struct FinalizedKeyframe {
 };
 
 // Track lengths of the points handed over (the rays the surface and the COLMAP model get).
+// Over the map's points (the frame points are counted apart: they have no keyframe rays).
 struct TrackStats {
   int points = 0;
+  int frame_points = 0;         // TrackerOptions::frame_points handed over
   double mean_keyframes = 0.0;  // distinct keyframes observing a point
   double median_keyframes = 0.0;
   double mean_rays = 0.0;

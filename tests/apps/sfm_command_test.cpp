@@ -110,8 +110,17 @@ class SfmCommandShortDrive : public ::testing::Test {
 };
 testing::TempDir* SfmCommandShortDrive::dir_ = nullptr;
 
+// A value of stats/sfm_summary.csv (-1 when missing).
+double SummaryValue(const fs::path& out, const std::string& name) {
+  for (const std::string& line :
+       testing::SplitText(testing::ReadTextFile(out / "stats" / "sfm_summary.csv")))
+    if (line.rfind(name + ",", 0) == 0) return std::stod(line.substr(name.size() + 1));
+  return -1.0;
+}
+
 // The COLMAP text model read back by `surface --colmap`'s reader: one keyframe per keyframe of
-// poses.tum with its centre (the mean camera centre), every point of points.ply.
+// poses.tum with its centre (the mean camera centre), every point of points.ply but the frame
+// points (no keyframe sees them, TrackerOptions::frame_points).
 void CheckColmapModel(const fs::path& drive, const fs::path& out) {
   const std::vector<SurfaceKeyframe> colmap = LoadColmapKeyframes(out / "sparse");
   const std::vector<StampedPose> poses = ReadTum(out / "poses.tum");
@@ -125,7 +134,10 @@ void CheckColmapModel(const fs::path& drive, const fs::path& out) {
     EXPECT_LT((colmap[k].centre - poses[k].world_from_rig * center_in_rig).norm(), 1e-6) << k;
     points += colmap[k].points.size();
   }
-  EXPECT_EQ(points, ReadPlyPoints(out / "points.ply").points.size());
+  const double frame_points = SummaryValue(out, "frame_points");
+  EXPECT_GT(frame_points, 0.0);
+  EXPECT_EQ(points + static_cast<size_t>(frame_points),
+            ReadPlyPoints(out / "points.ply").points.size());
 
   // images.txt and points3D.txt agree: every (IMAGE_ID, POINT2D_IDX) of a track is a 2-D point
   // of that image naming the track's point; one image per camera per keyframe.

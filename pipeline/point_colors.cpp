@@ -58,14 +58,15 @@ std::vector<Rgb8> ColorPoints(const Rig& rig, const std::vector<FinalizedKeyfram
   std::vector<Image> images;
   std::unordered_map<long, size_t> image_of;  // frame * num_cameras + camera -> images[]
   size_t num_points = 0;
+  // A sample of point num_points in image (frame, camera).
+  auto add_sample = [&](int frame, int camera, const Eigen::Vector2d& pixel) {
+    const long key = static_cast<long>(frame) * num_cameras + camera;
+    auto [it, inserted] = image_of.emplace(key, images.size());
+    if (inserted) images.push_back({frame, camera, {}, {}});
+    images[it->second].samples.push_back({num_points, pixel});
+  };
   for (const FinalizedKeyframe& keyframe : keyframes) {
     for (const FinalizedPoint& point : keyframe.points) {
-      auto add_sample = [&](int frame, int camera, const Eigen::Vector2d& pixel) {
-        const long key = static_cast<long>(frame) * num_cameras + camera;
-        auto [it, inserted] = image_of.emplace(key, images.size());
-        if (inserted) images.push_back({frame, camera, {}, {}});
-        images[it->second].samples.push_back({num_points, pixel});
-      };
       for (const FinalizedRay& ray : point.rays) {
         const auto frame = frame_of.find(ray.keyframe);
         if (frame == frame_of.end() || ray.camera < 0 || ray.camera >= num_cameras) continue;

@@ -1211,13 +1211,15 @@ FinalizedKeyframe Tracker::Impl::MakeFinalized(int k, const std::vector<int>& ha
     FinalizedPoint finalized_point;
     finalized_point.point = kFramePointIdBase + f;
     finalized_point.frame_point = true;
-    if (TriangulatePoint(FramePointRays(frame_point), options.triangulation,
-                         &finalized_point.position) != TriangulationStatus::kOk)
+    // The rays' centres are the frame rays' (each frame's pose computed once).
+    const std::vector<WorldRay> rays = FramePointRays(frame_point);
+    if (TriangulatePoint(rays, options.triangulation, &finalized_point.position) !=
+        TriangulationStatus::kOk)
       continue;
-    for (const auto& [stamp, o] : frame_point.observations) {
-      const FrameStamp& frame_stamp = frame_stamps[stamp];
-      finalized_point.frame_rays.push_back({frame_stamp.keyframe, frame_stamp.frame, o.camera,
-                                            FrameStampPose(frame_stamp) * CenterInRig(o.camera)});
+    for (size_t i = 0; i < rays.size(); ++i) {
+      const auto& [stamp, o] = frame_point.observations[i];
+      finalized_point.frame_rays.push_back(
+          {frame_stamps[stamp].keyframe, frame_stamps[stamp].frame, o.camera, rays[i].center});
     }
     event.points.push_back(std::move(finalized_point));
   }

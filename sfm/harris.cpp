@@ -205,18 +205,22 @@ bool IsLocalMaximum(const cv::Mat& response, int x, int y, int radius) {
 
 // Bilinear samples of `image` (8-bit grey) on the size × size grid whose top-left sample is at
 // (x, y), into out (row-major); replicated border outside the image, as cv::getRectSubPix.
-void SampleWindow(const cv::Mat& image, float x, float y, int size, float* out) {
+// Separable inside the image: size + 1 rows interpolated along x (each pixel converted once)
+// into `rows` ((size + 1) · size floats), then pairs of them along y.
+void SampleWindow(const cv::Mat& image, float x, float y, int size, float* __restrict rows,
+                  float* __restrict out) {
   const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
   const float a = x - ix, b = y - iy;
   if (ix >= 0 && iy >= 0 && ix + size < image.cols && iy + size < image.rows) {
-    const float w00 = (1.f - a) * (1.f - b), w01 = a * (1.f - b), w10 = (1.f - a) * b, w11 = a * b;
-    for (int r = 0; r < size; ++r) {
-      const uchar* p0 = image.ptr<uchar>(iy + r) + ix;
-      const uchar* p1 = p0 + image.step[0];
-      float* o = out + r * size;
-      for (int c = 0; c < size; ++c)
-        o[c] = w00 * p0[c] + w01 * p0[c + 1] + w10 * p1[c] + w11 * p1[c + 1];
+    for (int r = 0; r <= size; ++r) {
+      const uchar* __restrict p = image.ptr<uchar>(iy + r) + ix;
+      float* __restrict h = rows + static_cast<size_t>(r) * size;
+      for (int c = 0; c < size; ++c) {
+        const float left = p[c], right = p[c + 1];
+        h[c] = left + a * (right - left);
+      }
     }
+    for (int k = 0; k < size * size; ++k) out[k] = rows[k] + b * (rows[k + size] - rows[k]);
     return;
   }
   cv::Mat window(size, size, CV_32F, out);
@@ -237,7 +241,7 @@ void RefineCornersSubpixel(const cv::Mat& image, const HarrisOptions& options,
   const int area = win * win;
   Eigen::ArrayXf mask(area), mask_px(area), mask_py(area), gx(area), gy(area);
   Eigen::ArrayXf gxx(area), gxy(area), gyy(area);  // assigned in place: no allocation per step
-  std::vector<float> buffer(padded * padded);
+  std::vector<float> buffer(padded * padded), rows((padded + 1) * padded);
   for (int i = 0; i < win; ++i) {
     const float y = static_cast<float>(i - half) / half;
     const float vy = std::exp(-y * y);
@@ -259,7 +263,7 @@ void RefineCornersSubpixel(const cv::Mat& image, const HarrisOptions& options,
       // The padded window centred at `current`, its central differences, and the weighted sums
       // of the normal equations (float, vectorised).
       SampleWindow(image, current.x - 0.5f * (padded - 1), current.y - 0.5f * (padded - 1), padded,
-                   buffer.data());
+                   rows.data(), buffer.data());
       for (int i = 0, k = 0; i < win; ++i) {
         const float* row = buffer.data() + (i + 1) * padded + 1;
         for (int j = 0; j < win; ++j, ++k) {

@@ -42,19 +42,113 @@ double Dot(const float* a, const float* b, int area) {
   return (s0 + s1) + (s2 + s3);
 }
 
+// One row of a window interpolated along x: h[c] = p[c] + a (p[c + 1] − p[c]) for c < size.
+// Restricted pointers: the row of bytes could otherwise alias the floats as far as the compiler
+// knows, which kept the loop scalar.
+void InterpolateRowAlongX(const uchar* __restrict p, int size, float a, float* __restrict h) {
+  for (int c = 0; c < size; ++c) {
+    const float left = p[c], right = p[c + 1];
+    h[c] = left + a * (right - left);
+  }
+}
+
+// The bilinear samples of the (2 half_window + 1)² window centred at `pixel` into `values`
+// (row-major); false when the window or its interpolation neighbours leave the image.
+// Separable: size + 1 rows interpolated along x, then pairs of them along y (two products per
+// sample instead of four, and each pixel converted once).
+bool InterpolatedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int half_window,
+                        float* __restrict values) {
+  const double margin = half_window + 1.0;
+  if (!(pixel.x() >= margin && pixel.y() >= margin && pixel.x() <= image.cols - 1 - margin &&
+        pixel.y() <= image.rows - 1 - margin))
+    return false;
+  const int size = 2 * half_window + 1;
+  // Top-left sample; with the margin above, the window and its interpolation neighbours are
+  // inside the image.
+  const double x = pixel.x() - half_window, y = pixel.y() - half_window;
+  const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
+  const float a = static_cast<float>(x - ix), b = static_cast<float>(y - iy);
+  thread_local std::vector<float> rows;
+  rows.resize(static_cast<size_t>(size + 1) * size);
+  for (int r = 0; r <= size; ++r)
+    InterpolateRowAlongX(image.ptr<uchar>(iy + r) + ix, size, a,
+                         rows.data() + static_cast<size_t>(r) * size);
+  const float* __restrict top = rows.data();
+  const int area = size * size;
+  for (int k = 0; k < area; ++k) values[k] = top[k] + b * (top[k + size] - top[k]);
+  return true;
+}
+
+// Sums over a window's samples in kLanes interleaved partial sums (vectorised: a single running
+// float sum is a chain of dependent additions), each lane's float sum then added in double.
+constexpr int kLanes = 8;
+struct WindowSums {
+  double sum = 0.0, squares = 0.0, dot = 0.0;  // of d = v − shift, d², w d
+};
+template <bool kWithDot>
+WindowSums SumWindow(const float* __restrict values, const float* __restrict weights, int area,
+                     float shift) {
+  float sum[kLanes] = {}, squares[kLanes] = {}, dot[kLanes] = {};
+  int k = 0;
+  for (; k + kLanes <= area; k += kLanes)
+    for (int l = 0; l < kLanes; ++l) {
+      const float d = values[k + l] - shift;
+      sum[l] += d;
+      squares[l] += d * d;
+      if (kWithDot) dot[l] += weights[k + l] * d;
+    }
+  WindowSums sums;
+  for (; k < area; ++k) {
+    const float d = values[k] - shift;
+    sums.sum += d;
+    sums.squares += d * d;
+    if (kWithDot) sums.dot += weights[k] * d;
+  }
+  for (int l = 0; l < kLanes; ++l) {
+    sums.sum += sum[l];
+    sums.squares += squares[l];
+    if (kWithDot) sums.dot += dot[l];
+  }
+  return sums;
+}
+
+// The norm of a window's samples less their mean, from their sums less the first sample (small
+// in a window of low contrast, where the rounding of the squares would matter):
+// Σ (v − mean)² = Σ d² − area · (Σ d / area)². NaN when the window is flat (below a quarter of a
+// grey level of standard deviation).
+double CentredNorm(const WindowSums& sums, int area) {
+  const double shifted_mean = sums.sum / area;
+  const double norm = std::sqrt(std::max(0.0, sums.squares - area * shifted_mean * shifted_mean));
+  return norm < 0.25 * std::sqrt(static_cast<double>(area)) ? kNaN : norm;
+}
+
+// The ZNCC of window1 (a normalised window: zero mean, unit norm; its sum window1_sum) with the
+// image's window centred at `pixel`, without normalising the second window: with d = v − shift,
+//   Σ w1 (v − mean) / ‖v − mean‖ = (Σ w1 d − (mean − shift) Σ w1) / ‖v − mean‖.
+// NaN where NormalisedWindow fails (the window leaves the image or is flat).
+double ZnccWithWindow(const float* window1, double window1_sum, const cv::Mat& image,
+                      const Eigen::Vector2d& pixel, int half_window) {
+  const int size = 2 * half_window + 1, area = size * size;
+  thread_local std::vector<float> values;
+  values.resize(area);
+  if (!InterpolatedWindow(image, pixel, half_window, values.data())) return kNaN;
+  const WindowSums sums = SumWindow<true>(values.data(), window1, area, values[0]);
+  const double norm = CentredNorm(sums, area);
+  return (sums.dot - sums.sum / area * window1_sum) / norm;
+}
+
 // Moves pixel2 to the subpixel maximum of the ZNCC between window1 and the second image's
 // window there; returns that ZNCC (or the original score when nothing better is found).
 // `score` is the ZNCC at *pixel2 itself.
 double RefineSubpixel(const float* window1, const cv::Mat& image2, const ZnccOptions& options,
-                      double score, Eigen::Vector2d* pixel2, std::vector<float>* scratch) {
+                      double score, Eigen::Vector2d* pixel2) {
   const int size = 2 * options.half_window + 1;
   const int area = size * size;
-  scratch->resize(area);
+  double window1_sum = 0.0;
+  for (int k = 0; k < area; ++k) window1_sum += window1[k];
   const double h = options.subpixel_step;
   auto score_at = [&](const Eigen::Vector2d& pixel) {
-    return NormalisedWindow(image2, pixel, options.half_window, scratch->data())
-               ? Dot(window1, scratch->data(), area)
-               : kNaN;
+    return ZnccWithWindow(window1, window1_sum, image2, pixel, options.half_window);
   };
   // Vertex of the parabola through (-h, minus), (0, centre), (h, plus), within [-h, h].
   auto vertex = [h](double minus, double centre, double plus) {
@@ -137,7 +231,6 @@ constexpr double kGridCell = 16.0;
 struct MatchBuffers {
   WindowSet windows1, windows2;
   std::vector<int> near;
-  std::vector<float> scratch;
 };
 
 MatchBuffers& ThreadBuffers() {
@@ -145,64 +238,18 @@ MatchBuffers& ThreadBuffers() {
   return buffers;
 }
 
-// One row of a window interpolated along x: h[c] = p[c] + a (p[c + 1] − p[c]) for c < size.
-// Restricted pointers: the row of bytes could otherwise alias the floats as far as the compiler
-// knows, which kept the loop scalar.
-void InterpolateRowAlongX(const uchar* __restrict p, int size, float a, float* __restrict h) {
-  for (int c = 0; c < size; ++c) {
-    const float left = p[c], right = p[c + 1];
-    h[c] = left + a * (right - left);
-  }
-}
-
 }  // namespace
 
 bool NormalisedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int half_window,
                       float* values) {
-  const double margin = half_window + 1.0;
-  if (!(pixel.x() >= margin && pixel.y() >= margin && pixel.x() <= image.cols - 1 - margin &&
-        pixel.y() <= image.rows - 1 - margin))
-    return false;
-  const int size = 2 * half_window + 1;
-  // Top-left sample; with the margin above, the window and its interpolation neighbours are
-  // inside the image.
-  const double x = pixel.x() - half_window, y = pixel.y() - half_window;
-  const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
-  const float a = static_cast<float>(x - ix), b = static_cast<float>(y - iy);
-  // Separable: size + 1 rows interpolated along x, then pairs of them along y (two products
-  // per sample instead of four, and each pixel converted once).
-  thread_local std::vector<float> rows;
-  rows.resize(static_cast<size_t>(size + 1) * size);
-  for (int r = 0; r <= size; ++r)
-    InterpolateRowAlongX(image.ptr<uchar>(iy + r) + ix, size, a,
-                         rows.data() + static_cast<size_t>(r) * size);
-  const int area = size * size;
-  // Sums of the samples less the first pixel's value (small in a window of low contrast, where
-  // the rounding of the squares would matter).
-  const float shift = rows[0];
-  double sum = 0.0, squares = 0.0;
-  for (int r = 0; r < size; ++r) {
-    const float* top = rows.data() + static_cast<size_t>(r) * size;
-    const float* bottom = top + size;
-    float* v = values + r * size;
-    float row_sum = 0.f, row_squares = 0.f;
-    for (int c = 0; c < size; ++c) {
-      v[c] = top[c] + b * (bottom[c] - top[c]);
-      const float d = v[c] - shift;
-      row_sum += d;
-      row_squares += d * d;
-    }
-    sum += row_sum;
-    squares += row_squares;
-  }
-  const double shifted_mean = sum / area;
-  const double mean = shift + shifted_mean;
-  // Σ (v − mean)² = Σ d² − area · (Σ d / area)², d = v − shift.
-  const double norm = std::sqrt(std::max(0.0, squares - area * shifted_mean * shifted_mean));
-  // Flat: below a quarter of a grey level of standard deviation.
-  if (norm < 0.25 * std::sqrt(static_cast<double>(area))) return false;
+  if (!InterpolatedWindow(image, pixel, half_window, values)) return false;
+  const int size = 2 * half_window + 1, area = size * size;
+  const float shift = values[0];
+  const WindowSums sums = SumWindow<false>(values, nullptr, area, shift);
+  const double norm = CentredNorm(sums, area);
+  if (std::isnan(norm)) return false;
   const float inverse = static_cast<float>(1.0 / norm);
-  const float mean_f = static_cast<float>(mean);
+  const float mean_f = static_cast<float>(shift + sums.sum / area);
   for (int k = 0; k < area; ++k) values[k] = (values[k] - mean_f) * inverse;
   return true;
 }
@@ -323,8 +370,7 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
     if (options.mutual && best2[j] != static_cast<int>(i)) continue;
     ZnccMatch match{static_cast<int>(i), j, score1[i], corners2[j]};
     if (options.subpixel)
-      match.zncc =
-          RefineSubpixel(windows1[i], image2, options, match.zncc, &match.pixel2, &buffers.scratch);
+      match.zncc = RefineSubpixel(windows1[i], image2, options, match.zncc, &match.pixel2);
     matches.push_back(match);
   }
   if (!options.mutual) {

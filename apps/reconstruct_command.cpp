@@ -159,14 +159,17 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       snapshot_observed_points[snapshot.last_keyframe.value] = snapshot.observed_points;
     };
   }
+  // The SfM's files, by the sfm command's writer (pipeline/sfm_outputs.h), as soon as the SfM
+  // has finished, while the surface finishes.
+  SfmOutputs outputs;
+  callbacks.sfm_finished = [&](const SfmRunResult& sfm, double queue_blocked_seconds) {
+    SfmOutputOptions output_options;
+    output_options.frame_rate = o.sfm.frame_rate;
+    output_options.queue_wait_seconds = queue_blocked_seconds;
+    outputs = WriteSfmOutputs(drive, sfm, partial, output_options);
+  };
   const PipelineResult result = RunPipeline(drive, o.pipeline, callbacks);
   const SfmRunResult& sfm = result.sfm;
-
-  // The SfM's files, by the sfm command's writer (pipeline/sfm_outputs.h).
-  SfmOutputOptions output_options;
-  output_options.frame_rate = o.sfm.frame_rate;
-  output_options.queue_wait_seconds = result.queue_blocked_seconds;
-  const SfmOutputs outputs = WriteSfmOutputs(drive, sfm, partial, output_options);
   spdlog::info("reconstruct: point colours from {} keyframe images in {:.2f} s",
                outputs.colors.images_read, outputs.colors.seconds);
   // No surface file without a surface (a run that is not usable says why). Each vertex takes

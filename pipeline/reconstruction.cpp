@@ -148,6 +148,15 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
       sfm_error = std::current_exception();
     }
     queue.Close();  // the surface thread drains what is queued, then finishes
+    // The SfM's result is final: the caller's work on it overlaps the surface's last keyframes
+    // (a loop closure's or the final adjustment's replay, the final smoothing).
+    if (!sfm_error && !abort && callbacks.sfm_finished) {
+      try {
+        callbacks.sfm_finished(result.sfm, queue.BlockedSeconds());
+      } catch (...) {
+        sfm_error = std::current_exception();
+      }
+    }
     sfm_done = true;
   });
 

@@ -86,6 +86,11 @@ struct PipelineCallbacks {
   std::function<void(const PipelineProgress&)> progress;
   // From the surface thread, after each multiple of snapshot_every sculpted keyframes.
   std::function<void(const PipelineSnapshot&)> snapshot;
+  // From the SfM thread, once, when the SfM has finished without error (PipelineResult::sfm as
+  // it will be returned; the seconds the SfM waited for room in the queue), while the surface
+  // thread finishes its last keyframes: where a caller writes the SfM's files. What it throws
+  // fails the run as an error of the SfM.
+  std::function<void(const SfmRunResult&, double queue_blocked_seconds)> sfm_finished;
 };
 
 struct PipelineResult {

@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <stdexcept>
 #include <string>
+#include <thread>
 
 #include "calib/drive.h"
 #include "tests/apps/short_drive.h"
@@ -44,6 +46,43 @@ TEST(PipelineShortDrive, TheSurfaceThreadRunsNicerThanTheSfm) {
   EXPECT_EQ(SurfaceThreadNiceness(drive, 0), base);
   EXPECT_EQ(SurfaceThreadNiceness(drive, 5), std::min(19, base + 5));
   EXPECT_EQ(ThisThreadNiceness(), base);  // the caller's own priority is untouched
+}
+
+// sfm_finished comes once, from the SfM thread, with the SfM's result as RunPipeline returns it;
+// what it throws fails the run.
+TEST(PipelineShortDrive, SfmFinishedGivesTheFinalSfmResultOnce) {
+  std::string error;
+  const std::filesystem::path folder = testing::ShortDrive(&error);
+  ASSERT_FALSE(folder.empty()) << error;
+  const Drive drive = Drive::Open(folder);
+  PipelineOptions options;
+  options.sfm.max_frames = 40;
+  int calls = 0;
+  size_t keyframes = 0, frames = 0;
+  Eigen::Vector3d last_centre = Eigen::Vector3d::Zero();
+  bool on_caller_thread = true;
+  const auto caller = std::this_thread::get_id();
+  PipelineCallbacks callbacks;
+  callbacks.sfm_finished = [&](const SfmRunResult& sfm, double queue_blocked_seconds) {
+    ++calls;
+    on_caller_thread = std::this_thread::get_id() == caller;
+    keyframes = sfm.keyframes.size();
+    frames = sfm.frames.size();
+    if (!sfm.keyframes.empty()) last_centre = sfm.keyframes.back().world_from_rig.translation;
+    EXPECT_GE(queue_blocked_seconds, 0.0);
+  };
+  const PipelineResult result = RunPipeline(drive, options, callbacks);
+  EXPECT_EQ(calls, 1);
+  EXPECT_FALSE(on_caller_thread);
+  ASSERT_GE(result.sfm.keyframes.size(), 2u);
+  EXPECT_EQ(keyframes, result.sfm.keyframes.size());
+  EXPECT_EQ(frames, result.sfm.frames.size());
+  EXPECT_EQ(last_centre, result.sfm.keyframes.back().world_from_rig.translation);
+
+  callbacks.sfm_finished = [](const SfmRunResult&, double) {
+    throw std::runtime_error("the SfM's files could not be written");
+  };
+  EXPECT_THROW(RunPipeline(drive, options, callbacks), std::runtime_error);
 }
 
 TEST(PipelineOptions, ChecksTheSurfaceThreadNiceness) {

@@ -66,17 +66,44 @@ bool NormalisedWindowAt(const cv::Mat& image, int x, int y, int h, std::vector<f
   return true;
 }
 
-// The same window at a subpixel centre (NormalisedWindow); empty when it leaves the image or is
-// flat.
-std::vector<float> SubpixelWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int h) {
-  std::vector<float> values(static_cast<size_t>(2 * h + 1) * (2 * h + 1));
-  if (!NormalisedWindow(image, pixel, h, values.data())) return {};
-  return values;
-}
+// The corners of an image by cell of a cols × rows grid of side `cell`, in index order per cell,
+// as compressed rows; only those marked in `selected` when given.
+class CellLists {
+ public:
+  CellLists(const std::vector<Eigen::Vector2d>& corners, int cols, int rows, double cell,
+            const std::vector<char>* selected)
+      : start_(static_cast<size_t>(cols) * rows + 1, 0) {
+    std::vector<int> cell_of(corners.size(), -1);
+    for (size_t i = 0; i < corners.size(); ++i) {
+      if (selected && !(*selected)[i]) continue;
+      const int x = std::clamp(static_cast<int>(corners[i].x() / cell), 0, cols - 1);
+      const int y = std::clamp(static_cast<int>(corners[i].y() / cell), 0, rows - 1);
+      cell_of[i] = y * cols + x;
+      ++start_[cell_of[i] + 1];
+    }
+    for (size_t k = 1; k < start_.size(); ++k) start_[k] += start_[k - 1];
+    indices_.resize(start_.back());
+    std::vector<int> fill(start_.begin(), start_.end() - 1);
+    for (size_t i = 0; i < corners.size(); ++i)
+      if (cell_of[i] >= 0) indices_[fill[cell_of[i]]++] = static_cast<int>(i);
+  }
+  struct Range {
+    const int* first;
+    const int* last;
+    const int* begin() const { return first; }
+    const int* end() const { return last; }
+  };
+  Range Cell(size_t k) const {
+    return {indices_.data() + start_[k], indices_.data() + start_[k + 1]};
+  }
 
-float Dot(const std::vector<float>& a, const std::vector<float>& b) {
+ private:
+  std::vector<int> start_, indices_;
+};
+
+float Dot(const float* a, const float* b, int area) {
   float sum = 0.0f;
-  for (size_t i = 0; i < a.size(); ++i) sum += a[i] * b[i];
+  for (int i = 0; i < area; ++i) sum += a[i] * b[i];
   return sum;
 }
 
@@ -99,7 +126,7 @@ bool SearchEveryPixel(const std::vector<float>& reference, const cv::Mat& image,
     for (int i = 0; i < side; ++i) {
       if (!NormalisedWindowAt(image, x0 + i, y0 + j, h, &window)) continue;
       const int index = j * side + i;
-      scores[index] = Dot(reference, window);
+      scores[index] = Dot(reference.data(), window.data(), static_cast<int>(window.size()));
       if (best < 0 || scores[index] > scores[best]) best = index;
     }
   if (best < 0) return false;
@@ -211,17 +238,15 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
     // at most the 2x2 cells around its centre's nearest cell corner (3x3 searched for safety).
     const int cols = static_cast<int>(std::ceil(prepared[c].cols / cell)) + 1;
     const int rows = static_cast<int>(std::ceil(prepared[c].rows / cell)) + 1;
-    std::vector<std::vector<int>> grid(static_cast<size_t>(cols) * rows);
-    std::vector<std::vector<int>> all_grid(static_cast<size_t>(cols) * rows);
-    for (size_t i = 0; i < corners[c].size(); ++i) {
-      const int x = std::clamp(static_cast<int>(corners[c][i].x() / cell), 0, cols - 1);
-      const int y = std::clamp(static_cast<int>(corners[c][i].y() / cell), 0, rows - 1);
-      all_grid[static_cast<size_t>(y) * cols + x].push_back(static_cast<int>(i));
-      if (eligible[c][i]) grid[static_cast<size_t>(y) * cols + x].push_back(static_cast<int>(i));
-    }
+    // Each cell's corners in index order (compressed rows: no allocation per cell); `eligible`
+    // the same for the eligible corners only.
+    const CellLists all_grid(corners[c], cols, rows, cell, nullptr);
+    const CellLists grid(corners[c], cols, rows, cell, &eligible[c]);
     std::vector<float> reference_window;
-    std::vector<std::vector<float>> corner_windows(corners[c].size());
-    std::vector<char> corner_ready(corners[c].size(), 0);
+    // The corners' windows, computed when first needed, one after the other in one buffer.
+    const int area = (2 * options_.half_window + 1) * (2 * options_.half_window + 1);
+    std::vector<float> corner_windows(corners[c].size() * static_cast<size_t>(area));
+    std::vector<char> corner_window_state(corners[c].size(), 0);  // 0 not yet, 1 valid, 2 not
     const Camera& camera = rig_.cameras[c];
     for (int index : by_camera[c]) {
       const MapPointProjection& candidate = candidates[index];
@@ -252,7 +277,7 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
         const int py = static_cast<int>(std::floor(peak.y() / cell));
         for (int y = std::max(0, py - 1); y <= std::min(rows - 1, py + 1); ++y)
           for (int x = std::max(0, px - 1); x <= std::min(cols - 1, px + 1); ++x)
-            for (int i : all_grid[static_cast<size_t>(y) * cols + x]) {
+            for (int i : all_grid.Cell(static_cast<size_t>(y) * cols + x)) {
               const double distance = (corners[c][i] - peak).norm();
               if (distance <= nearest_distance) {
                 nearest_distance = distance;
@@ -272,7 +297,7 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
       bool reference_ready = false, reference_ok = false;
       for (int y = std::max(0, cy - 1); y <= std::min(rows - 1, cy + 1); ++y)
         for (int x = std::max(0, cx - 1); x <= std::min(cols - 1, cx + 1); ++x)
-          for (int i : grid[static_cast<size_t>(y) * cols + x]) {
+          for (int i : grid.Cell(static_cast<size_t>(y) * cols + x)) {
             if ((corners[c][i] - predicted).norm() > radius * candidate.radius_scale) continue;
             // Zncc(reference, corner), with each window normalised once.
             if (!reference_ready) {
@@ -282,12 +307,13 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
                                                 options_.half_window, &reference_window);
             }
             if (!reference_ok) break;
-            if (!corner_ready[i]) {
-              corner_ready[i] = 1;
-              corner_windows[i] = SubpixelWindow(prepared[c], corners[c][i], options_.half_window);
-            }
-            if (corner_windows[i].empty()) continue;
-            two.Offer(Dot(reference_window, corner_windows[i]), i);
+            float* const window = corner_windows.data() + static_cast<size_t>(i) * area;
+            if (corner_window_state[i] == 0)
+              corner_window_state[i] =
+                  NormalisedWindow(prepared[c], corners[c][i], options_.half_window, window) ? 1
+                                                                                             : 2;
+            if (corner_window_state[i] != 1) continue;
+            two.Offer(Dot(reference_window.data(), window, area), i);
           }
       if (two.index < 0 || two.best < options_.min_zncc) continue;
       if (!IsDistinctZncc(two.best, two.second, options_.max_distance_ratio)) continue;

@@ -562,16 +562,20 @@ std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
   auto key = [num_cameras](int track, int camera) {
     return static_cast<int64_t>(track) * num_cameras + camera;
   };
-  // The (track, camera) pairs the frame observes, and the observations that may become map
-  // points: those whose track has none.
-  std::unordered_set<int64_t> observed;
-  observed.reserve(2 * observations.size());
+  // The (track, camera) pairs the frame observes (sorted keys: no allocation per entry), and
+  // the observations that may become map points: those whose track has none.
+  std::vector<int64_t> observed;
+  observed.reserve(observations.size());
   std::vector<char> eligible(observations.size(), 0);
   for (size_t i = 0; i < observations.size(); ++i) {
-    observed.insert(key(observations[i].track, observations[i].camera));
+    observed.push_back(key(observations[i].track, observations[i].camera));
     const auto it = track_to_point.Find(observations[i].track);
     eligible[i] = it < 0 || !points[it].alive;
   }
+  std::sort(observed.begin(), observed.end());
+  auto is_observed = [&observed](int64_t k) {
+    return std::binary_search(observed.begin(), observed.end(), k);
+  };
   const Rigid3d rig_from_world = world_from_rig.Inverse();
   const int num_keyframes = static_cast<int>(keyframes.size());
   const int stamp = searches++;
@@ -585,7 +589,7 @@ std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
       point_stamp[it] = stamp;
       const Eigen::Vector3d in_rig = rig_from_world * point.position;
       for (int c = 0; c < num_cameras; ++c) {
-        if (observed.count(key(point.track, c))) continue;
+        if (is_observed(key(point.track, c))) continue;
         // The direction the map's model expects: from the central centre in central mode.
         const Eigen::Vector3d bearing =
             rig.cameras[c].cam_from_rig.rotation * (in_rig - CenterInRig(c));
@@ -596,10 +600,13 @@ std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
   std::vector<Reobservation> found = search(candidates, eligible);
   // The front end's promise, checked: each observation once, each (track, camera) once, only
   // eligible observations, only candidates.
-  std::unordered_set<int64_t> candidate_keys;
+  std::vector<int64_t> candidate_keys;
+  candidate_keys.reserve(candidates.size());
   for (const MapPointProjection& candidate : candidates)
-    candidate_keys.insert(key(candidate.track, candidate.camera));
+    candidate_keys.push_back(key(candidate.track, candidate.camera));
+  std::sort(candidate_keys.begin(), candidate_keys.end());
   std::vector<char> used(observations.size(), 0);
+  std::unordered_set<int64_t> taken;  // the pairs of the results so far
   std::vector<Reobservation> result;
   for (const Reobservation& r : found) {
     if (r.observation >= static_cast<int>(observations.size())) continue;
@@ -608,10 +615,12 @@ std::vector<Reobservation> Tracker::Impl::SearchMapPoints(
                  : r.camera < 0 || r.camera >= num_cameras)
       continue;
     const int64_t k = key(r.track, existing ? observations[r.observation].camera : r.camera);
-    if (!candidate_keys.count(k) || observed.count(k)) continue;
+    if (!std::binary_search(candidate_keys.begin(), candidate_keys.end(), k) || is_observed(k) ||
+        taken.count(k))
+      continue;
     if (existing && (!eligible[r.observation] || used[r.observation])) continue;
     if (existing) used[r.observation] = 1;
-    observed.insert(k);
+    taken.insert(k);
     result.push_back(r);
   }
   return result;

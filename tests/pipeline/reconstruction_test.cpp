@@ -85,6 +85,20 @@ TEST(PipelineShortDrive, SfmFinishedGivesTheFinalSfmResultOnce) {
   EXPECT_THROW(RunPipeline(drive, options, callbacks), std::runtime_error);
 }
 
+// reconstruct's sculptor differs from the surface command's where the SfM's own points asked
+// for it (docs/figures.md F53, F58, F59).
+TEST(PipelineOptions, TheSculptorDefaultsOfReconstruct) {
+  const SculptorOptions surface;
+  const SculptorOptions reconstruct = PipelineOptions().sculptor;
+  EXPECT_EQ(surface.keyframes_per_step, 1);
+  EXPECT_EQ(reconstruct.keyframes_per_step, 3);
+  EXPECT_EQ(surface.enclosed_free_rounds, 1);
+  EXPECT_EQ(reconstruct.enclosed_free_rounds, 2);
+  EXPECT_EQ(surface.min_aperture_deg, 5.0);
+  EXPECT_EQ(reconstruct.min_aperture_deg, 4.0);
+  EXPECT_EQ(reconstruct.Check(), "");
+}
+
 TEST(PipelineOptions, ChecksTheSurfaceThreadNiceness) {
   PipelineOptions options;
   EXPECT_EQ(options.Check(), "");

@@ -33,8 +33,9 @@ struct PipelineOptions {
   // The surface sculpted three keyframes a step (SculptorOptions::keyframes_per_step): the final
   // surface is sculpted again in one batch after the SfM's final adjustment (a corrected map),
   // so the steps shape only the live surface, at about 0.7 of the surface thread's time
-  // (docs/figures.md F53). Two rounds of enclosed free cells (enclosed_free_rounds, F58) and
-  // the aperture bound at 4° (min_aperture_deg, F59).
+  // (docs/figures.md F53). Two rounds of enclosed free cells (enclosed_free_rounds, F58), the
+  // aperture bound at 4° (min_aperture_deg, F59) and surface.ply's edge bound at 1.75 s
+  // (observed.max_edge_factor, F60).
   static SculptorOptions DefaultSculptor();
   SculptorOptions sculptor = DefaultSculptor();
   LoopReplay loop_replay = LoopReplay::kBatch;

@@ -96,6 +96,8 @@ TEST(PipelineOptions, TheSculptorDefaultsOfReconstruct) {
   EXPECT_EQ(reconstruct.enclosed_free_rounds, 2);
   EXPECT_EQ(surface.min_aperture_deg, 5.0);
   EXPECT_EQ(reconstruct.min_aperture_deg, 4.0);
+  EXPECT_EQ(surface.observed.max_edge_factor, 2.0);
+  EXPECT_EQ(reconstruct.observed.max_edge_factor, 1.75);
   EXPECT_EQ(reconstruct.Check(), "");
 }
 

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "calib/error.h"
+#include "sfm/internal/bilinear_grid.h"
 
 namespace omni {
 
@@ -205,22 +206,14 @@ bool IsLocalMaximum(const cv::Mat& response, int x, int y, int radius) {
 
 // Bilinear samples of `image` (8-bit grey) on the size × size grid whose top-left sample is at
 // (x, y), into out (row-major); replicated border outside the image, as cv::getRectSubPix.
-// Separable inside the image: size + 1 rows interpolated along x (each pixel converted once)
-// into `rows` ((size + 1) · size floats), then pairs of them along y.
+// Inside the image in two separable passes (internal::SampleBilinearGrid; `rows`: (size + 1) ·
+// size floats).
 void SampleWindow(const cv::Mat& image, float x, float y, int size, float* __restrict rows,
                   float* __restrict out) {
   const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
   const float a = x - ix, b = y - iy;
   if (ix >= 0 && iy >= 0 && ix + size < image.cols && iy + size < image.rows) {
-    for (int r = 0; r <= size; ++r) {
-      const uchar* __restrict p = image.ptr<uchar>(iy + r) + ix;
-      float* __restrict h = rows + static_cast<size_t>(r) * size;
-      for (int c = 0; c < size; ++c) {
-        const float left = p[c], right = p[c + 1];
-        h[c] = left + a * (right - left);
-      }
-    }
-    for (int k = 0; k < size * size; ++k) out[k] = rows[k] + b * (rows[k + size] - rows[k]);
+    internal::SampleBilinearGrid(image, ix, iy, a, b, size, rows, out);
     return;
   }
   cv::Mat window(size, size, CV_32F, out);

@@ -9,6 +9,7 @@
 
 #include "calib/error.h"
 #include "sfm/harris.h"
+#include "sfm/internal/corner_cells.h"
 #include "sfm/zncc_matching.h"
 
 namespace omni {
@@ -65,41 +66,6 @@ bool NormalisedWindowAt(const cv::Mat& image, int x, int y, int h, std::vector<f
   for (float& v : *window) v *= scale;
   return true;
 }
-
-// The corners of an image by cell of a cols × rows grid of side `cell`, in index order per cell,
-// as compressed rows; only those marked in `selected` when given.
-class CellLists {
- public:
-  CellLists(const std::vector<Eigen::Vector2d>& corners, int cols, int rows, double cell,
-            const std::vector<char>* selected)
-      : start_(static_cast<size_t>(cols) * rows + 1, 0) {
-    std::vector<int> cell_of(corners.size(), -1);
-    for (size_t i = 0; i < corners.size(); ++i) {
-      if (selected && !(*selected)[i]) continue;
-      const int x = std::clamp(static_cast<int>(corners[i].x() / cell), 0, cols - 1);
-      const int y = std::clamp(static_cast<int>(corners[i].y() / cell), 0, rows - 1);
-      cell_of[i] = y * cols + x;
-      ++start_[cell_of[i] + 1];
-    }
-    for (size_t k = 1; k < start_.size(); ++k) start_[k] += start_[k - 1];
-    indices_.resize(start_.back());
-    std::vector<int> fill(start_.begin(), start_.end() - 1);
-    for (size_t i = 0; i < corners.size(); ++i)
-      if (cell_of[i] >= 0) indices_[fill[cell_of[i]]++] = static_cast<int>(i);
-  }
-  struct Range {
-    const int* first;
-    const int* last;
-    const int* begin() const { return first; }
-    const int* end() const { return last; }
-  };
-  Range Cell(size_t k) const {
-    return {indices_.data() + start_[k], indices_.data() + start_[k + 1]};
-  }
-
- private:
-  std::vector<int> start_, indices_;
-};
 
 float Dot(const float* a, const float* b, int area) {
   float sum = 0.0f;
@@ -240,8 +206,8 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
     const int rows = static_cast<int>(std::ceil(prepared[c].rows / cell)) + 1;
     // Each cell's corners in index order (compressed rows: no allocation per cell); `eligible`
     // the same for the eligible corners only.
-    const CellLists all_grid(corners[c], cols, rows, cell, nullptr);
-    const CellLists grid(corners[c], cols, rows, cell, &eligible[c]);
+    const internal::CornerCells all_grid(corners[c], cols, rows, cell);
+    const internal::CornerCells grid(corners[c], cols, rows, cell, &eligible[c]);
     std::vector<float> reference_window;
     // The corners' windows, computed when first needed, one after the other in one buffer.
     const int area = (2 * options_.half_window + 1) * (2 * options_.half_window + 1);
@@ -277,7 +243,7 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
         const int py = static_cast<int>(std::floor(peak.y() / cell));
         for (int y = std::max(0, py - 1); y <= std::min(rows - 1, py + 1); ++y)
           for (int x = std::max(0, px - 1); x <= std::min(cols - 1, px + 1); ++x)
-            for (int i : all_grid.Cell(static_cast<size_t>(y) * cols + x)) {
+            for (int i : all_grid.Cell(x, y)) {
               const double distance = (corners[c][i] - peak).norm();
               if (distance <= nearest_distance) {
                 nearest_distance = distance;
@@ -297,7 +263,7 @@ std::vector<MapPointSearch::Match> MapPointSearch::Search(
       bool reference_ready = false, reference_ok = false;
       for (int y = std::max(0, cy - 1); y <= std::min(rows - 1, cy + 1); ++y)
         for (int x = std::max(0, cx - 1); x <= std::min(cols - 1, cx + 1); ++x)
-          for (int i : grid.Cell(static_cast<size_t>(y) * cols + x)) {
+          for (int i : grid.Cell(x, y)) {
             if ((corners[c][i] - predicted).norm() > radius * candidate.radius_scale) continue;
             // Zncc(reference, corner), with each window normalised once.
             if (!reference_ready) {

@@ -7,6 +7,8 @@
 #include <stdexcept>
 
 #include "calib/error.h"
+#include "sfm/internal/bilinear_grid.h"
+#include "sfm/internal/corner_cells.h"
 
 namespace omni {
 namespace {
@@ -42,20 +44,9 @@ double Dot(const float* a, const float* b, int area) {
   return (s0 + s1) + (s2 + s3);
 }
 
-// One row of a window interpolated along x: h[c] = p[c] + a (p[c + 1] − p[c]) for c < size.
-// Restricted pointers: the row of bytes could otherwise alias the floats as far as the compiler
-// knows, which kept the loop scalar.
-void InterpolateRowAlongX(const uchar* __restrict p, int size, float a, float* __restrict h) {
-  for (int c = 0; c < size; ++c) {
-    const float left = p[c], right = p[c + 1];
-    h[c] = left + a * (right - left);
-  }
-}
-
 // The bilinear samples of the (2 half_window + 1)² window centred at `pixel` into `values`
 // (row-major); false when the window or its interpolation neighbours leave the image.
-// Separable: size + 1 rows interpolated along x, then pairs of them along y (two products per
-// sample instead of four, and each pixel converted once).
+// Separable (internal::SampleBilinearGrid).
 bool InterpolatedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int half_window,
                         float* __restrict values) {
   const double margin = half_window + 1.0;
@@ -70,12 +61,7 @@ bool InterpolatedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int 
   const float a = static_cast<float>(x - ix), b = static_cast<float>(y - iy);
   thread_local std::vector<float> rows;
   rows.resize(static_cast<size_t>(size + 1) * size);
-  for (int r = 0; r <= size; ++r)
-    InterpolateRowAlongX(image.ptr<uchar>(iy + r) + ix, size, a,
-                         rows.data() + static_cast<size_t>(r) * size);
-  const float* __restrict top = rows.data();
-  const int area = size * size;
-  for (int k = 0; k < area; ++k) values[k] = top[k] + b * (top[k + size] - top[k]);
+  internal::SampleBilinearGrid(image, ix, iy, a, b, size, rows.data(), values);
   return true;
 }
 
@@ -176,55 +162,8 @@ double RefineSubpixel(const float* window1, const cv::Mat& image2, const ZnccOpt
   return best_score;
 }
 
-// Corners of the second image by grid cell (compressed rows), to find those inside a search
-// disc without visiting them all.
-class CornerGrid {
- public:
-  CornerGrid(const std::vector<Eigen::Vector2d>& corners, const cv::Size& image_size,
-             double cell_size)
-      : cell_size_(cell_size),
-        cols_(std::max(1, static_cast<int>(std::ceil(image_size.width / cell_size)))),
-        rows_(std::max(1, static_cast<int>(std::ceil(image_size.height / cell_size)))),
-        start_(cols_ * rows_ + 1, 0),
-        indices_(corners.size()) {
-    std::vector<int> cell_of(corners.size());
-    for (size_t j = 0; j < corners.size(); ++j) {
-      cell_of[j] = Row(corners[j].y()) * cols_ + Col(corners[j].x());
-      ++start_[cell_of[j] + 1];
-    }
-    for (size_t k = 1; k < start_.size(); ++k) start_[k] += start_[k - 1];
-    std::vector<int> fill(start_.begin(), start_.end() - 1);
-    for (size_t j = 0; j < corners.size(); ++j) indices_[fill[cell_of[j]]++] = static_cast<int>(j);
-  }
-
-  // Indices (ascending) of the corners in the cells that meet the disc's bounding box.
-  void Near(const Eigen::Vector2d& centre, double radius, std::vector<int>* out) const {
-    out->clear();
-    const int c0 = Col(centre.x() - radius), c1 = Col(centre.x() + radius);
-    const int r0 = Row(centre.y() - radius), r1 = Row(centre.y() + radius);
-    for (int r = r0; r <= r1; ++r)
-      for (int c = c0; c <= c1; ++c) {
-        const int cell = r * cols_ + c;
-        out->insert(out->end(), indices_.begin() + start_[cell],
-                    indices_.begin() + start_[cell + 1]);
-      }
-    std::sort(out->begin(), out->end());
-  }
-
- private:
-  int Col(double x) const {
-    return static_cast<int>(std::clamp(std::floor(x / cell_size_), 0.0, cols_ - 1.0));
-  }
-  int Row(double y) const {
-    return static_cast<int>(std::clamp(std::floor(y / cell_size_), 0.0, rows_ - 1.0));
-  }
-  double cell_size_;
-  int cols_, rows_;
-  std::vector<int> start_;
-  std::vector<int> indices_;
-};
-
-// Side of the cells of the CornerGrid (pixels): a few corners per cell at the usual density.
+// Side of the cells of the second image's corners (pixels): a few corners per cell at the usual
+// density.
 constexpr double kGridCell = 16.0;
 
 // Buffers reused by the calls of one thread (matching runs in parallel over the cameras).
@@ -328,7 +267,11 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
   auto window2 = [&](int j) {
     return windows2 ? (*windows2)[j] : static_cast<const WindowSet&>(buffers.windows2)[j];
   };
-  const CornerGrid grid(corners2, image2.size(), kGridCell);
+  // The second image's corners by cell, to find those inside a search disc without visiting
+  // them all.
+  const internal::CornerCells grid(
+      corners2, std::max(1, static_cast<int>(std::ceil(image2.cols / kGridCell))),
+      std::max(1, static_cast<int>(std::ceil(image2.rows / kGridCell))), kGridCell);
 
   // Best and second best score for each corner of the first image; best for each corner of
   // the second among the first-image corners whose region contains it (candidates visited in

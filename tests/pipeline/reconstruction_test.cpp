@@ -86,7 +86,7 @@ TEST(PipelineShortDrive, SfmFinishedGivesTheFinalSfmResultOnce) {
 }
 
 // reconstruct's sculptor differs from the surface command's where the SfM's own points asked
-// for it (docs/figures.md F53, F58, F59).
+// for it (docs/figures.md F53, F58 to F60).
 TEST(PipelineOptions, TheSculptorDefaultsOfReconstruct) {
   const SculptorOptions surface;
   const SculptorOptions reconstruct = PipelineOptions().sculptor;

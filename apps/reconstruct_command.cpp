@@ -249,6 +249,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
        queue_ms.empty() ? 0.0 : *std::max_element(queue_ms.begin(), queue_ms.end())},
       {"loop_closure", o.pipeline.sfm.loop_closure},
       {"surface_replay_seconds", result.replay_seconds},
+      {"surface_keyframes_skipped", result.surface_keyframes_skipped},
       {"surface_smoothing",
        {{"every_keyframe", o.pipeline.sculptor.smoothing.every_keyframe},
         {"at_extraction_seconds", result.final_smoothing.seconds},
@@ -357,6 +358,10 @@ void RegisterReconstructCommand(CLI::App& app, const GlobalOptions& global) {
                    "The surface thread runs this much nicer than the SfM (0 to 19; 0: the same "
                    "priority): the SfM sets the pace, the surface keeps up in the time left")
       ->capture_default_str();
+  command->add_flag("!--sculpt-superseded", o->pipeline.skip_superseded_keyframes,
+                    "A surface thread that is behind sculpts every keyframe, even those that a "
+                    "replay queued after them sculpts again (default: skipped, the same final "
+                    "surface; stats/keyframes.csv then has a row for each)");
   command
       ->add_option("--loop-replay", o->loop_replay,
                    "Surface after a loop closure: batch (the corrected keyframes sculpted at "

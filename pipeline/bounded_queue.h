@@ -7,6 +7,7 @@
 #include <cassert>
 #include <chrono>
 #include <condition_variable>
+#include <cstddef>
 #include <deque>
 #include <mutex>
 #include <optional>
@@ -43,6 +44,29 @@ class BoundedQueue {
     T item = std::move(items_.front());
     items_.pop_front();
     not_full_.notify_one();
+    return item;
+  }
+
+  // Pop, except that when a queued item after the first satisfies `supersedes` (it makes every
+  // item before it useless), the items before the last such item are dropped unseen, each
+  // handed to `dropped` first, and that item is returned. Both run under the queue's lock.
+  template <typename Supersedes, typename Dropped>
+  std::optional<T> PopLatest(Supersedes supersedes, Dropped dropped) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    not_empty_.wait(lock, [&] { return closed_ || !items_.empty(); });
+    if (items_.empty()) return std::nullopt;
+    size_t first = 0;
+    for (size_t i = items_.size(); i-- > 1;) {
+      if (supersedes(static_cast<const T&>(items_[i]))) {
+        first = i;
+        break;
+      }
+    }
+    for (size_t i = 0; i < first; ++i) dropped(static_cast<const T&>(items_[i]));
+    items_.erase(items_.begin(), items_.begin() + static_cast<std::ptrdiff_t>(first));
+    T item = std::move(items_.front());
+    items_.pop_front();
+    not_full_.notify_all();
     return item;
   }
 

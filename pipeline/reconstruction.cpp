@@ -196,7 +196,16 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
           callbacks.snapshot(snapshot);
         }
       };
-      while (std::optional<QueuedKeyframe> item = queue.Pop()) {
+      // A replay re-sculpts every keyframe from scratch: the keyframes queued before it are
+      // skipped, once the sculptor's s is known (the replay takes that s, so the surface is
+      // the same whether the surface thread was behind or not).
+      const auto supersedes = [&](const QueuedKeyframe& queued) {
+        return options.skip_superseded_keyframes && queued.replay && sculptor->scale() > 0.0;
+      };
+      const auto skip = [&result](const QueuedKeyframe& queued) {
+        result.surface_keyframes_skipped += queued.keyframes.size();
+      };
+      while (std::optional<QueuedKeyframe> item = queue.PopLatest(supersedes, skip)) {
         const double waited =
             std::chrono::duration<double, std::milli>(Clock::now() - item->pushed).count();
         const auto busy = Clock::now();

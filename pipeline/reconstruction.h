@@ -50,6 +50,10 @@ struct PipelineOptions {
   // queue; when both want a core the SfM gets it, and a surface that falls behind still gets the
   // cores whenever the SfM waits (a full queue, the end of the input). docs/figures.md F40.
   int surface_thread_nice = 10;
+  // A surface thread that is behind when a replay is queued skips the keyframes queued before
+  // it, which the replay sculpts again (the same final surfaces); false: it sculpts every
+  // keyframe it is handed (each has its row in surface_rows, whatever the timing).
+  bool skip_superseded_keyframes = true;
   int snapshot_every = 0;        // snapshot callback every K sculpted keyframes; 0: none
   double progress_period = 2.0;  // seconds between two progress callbacks
 
@@ -113,6 +117,9 @@ struct PipelineResult {
   std::vector<double> loop_replay_seconds;
   std::vector<size_t> loop_replay_keyframes;
   double replay_seconds = 0.0;  // surface time spent replaying after corrections
+  // Keyframes the surface thread did not sculpt because a replay queued after them re-sculpts
+  // them (the surface thread was behind when a correction came).
+  size_t surface_keyframes_skipped = 0;
   // The smoothing of the final surface when it waited for the end (SmoothingOptions::
   // every_keyframe off), part of surface_seconds.
   IncrementalSculptor::DeferredSmoothing final_smoothing;

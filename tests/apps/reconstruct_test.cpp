@@ -14,8 +14,8 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <numeric>
 #include <nlohmann/json.hpp>
+#include <numeric>
 #include <sstream>
 #include <thread>
 
@@ -111,7 +111,8 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
   const fs::path drive(OMNI_SHORT_DRIVE_DIR);
   const fs::path out = scratch / "rec";
   const auto result = RunOmnisculpt(
-      {"--quiet", "reconstruct", drive.string(), "--out", out.string(), "--snapshot-every", "20"},
+      {"--quiet", "reconstruct", drive.string(), "--out", out.string(), "--snapshot-every", "20",
+       "--sculpt-superseded"},  // rows for every keyframe, however far the surface fell behind
       scratch);
   ASSERT_EQ(result.exit_code, 0) << result.err;
   EXPECT_FALSE(fs::exists(fs::path(out.string() + ".incomplete")));
@@ -163,6 +164,7 @@ TEST(ReconstructShortDrive, EveryStageRunsAndTheSurfaceIsAManifold) {
   EXPECT_EQ(summary["frames_skipped"].get<int>(), 0);
   EXPECT_EQ(summary["triangles"].get<size_t>(), mesh.triangles.size());
   EXPECT_LE(summary["queue_max_size"].get<int>(), summary["queue_capacity"].get<int>());
+  EXPECT_EQ(summary["surface_keyframes_skipped"].get<size_t>(), 0u);  // --sculpt-superseded
   // The short drive is ~105 m long: a pose error after similarity registration below 1 m
   // means the SfM tracked the whole drive.
   EXPECT_LT(PoseRms(out, drive), 1.0);
@@ -405,7 +407,8 @@ TEST(ReconstructShortDrive, LoopClosureLowersThePoseErrorAndTheLoopMeets) {
   const fs::path drive(OMNI_SHORT_DRIVE_DIR);
   const fs::path with = scratch / "with", without = scratch / "without";
   auto run = RunOmnisculpt(
-      {"--quiet", "reconstruct", drive.string(), "--out", with.string(), "--loop-replay", "batch"},
+      {"--quiet", "reconstruct", drive.string(), "--out", with.string(), "--loop-replay", "batch",
+       "--sculpt-superseded"},  // rows for every keyframe, however far the surface fell behind
       scratch);
   ASSERT_EQ(run.exit_code, 0) << run.err;
   run = RunOmnisculpt(

@@ -52,6 +52,36 @@ TEST(BoundedQueue, CloseReleasesABlockedProducerAndDrainsForTheConsumer) {
   EXPECT_FALSE(queue.Pop().has_value());
 }
 
+// PopLatest returns the last queued item that supersedes those before it (here: negative
+// ones), dropping what precedes it; an item at the front is returned as Pop would.
+TEST(BoundedQueue, PopLatestDropsWhatTheLastSupersedingItemReplaces) {
+  BoundedQueue<int> queue(8);
+  for (int item : {-1, 2, 3, -4, 5, -6, 7}) ASSERT_TRUE(queue.Push(item));
+  const auto supersedes = [](int item) { return item < 0; };
+  std::vector<int> dropped;
+  const auto drop = [&dropped](int item) { dropped.push_back(item); };
+  std::optional<int> item = queue.PopLatest(supersedes, drop);
+  ASSERT_TRUE(item.has_value());
+  EXPECT_EQ(*item, -6);
+  EXPECT_EQ(dropped, (std::vector<int>{-1, 2, 3, -4, 5}));
+  item = queue.PopLatest(supersedes, drop);
+  ASSERT_TRUE(item.has_value());
+  EXPECT_EQ(*item, 7);
+  EXPECT_EQ(dropped.size(), 5u);
+
+  ASSERT_TRUE(queue.Push(-8));
+  ASSERT_TRUE(queue.Push(9));
+  item = queue.PopLatest(supersedes, drop);  // the superseding item is the first: nothing dropped
+  ASSERT_TRUE(item.has_value());
+  EXPECT_EQ(*item, -8);
+  EXPECT_EQ(dropped.size(), 5u);
+  queue.Close();
+  item = queue.PopLatest(supersedes, drop);
+  ASSERT_TRUE(item.has_value());
+  EXPECT_EQ(*item, 9);
+  EXPECT_FALSE(queue.PopLatest(supersedes, drop).has_value());
+}
+
 TEST(KeyframeConversion, CarriesIdsCentrePositionsAndRays) {
   FinalizedKeyframe keyframe;
   keyframe.keyframe = 7;

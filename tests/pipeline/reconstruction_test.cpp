@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -83,6 +84,42 @@ TEST(PipelineShortDrive, SfmFinishedGivesTheFinalSfmResultOnce) {
     throw std::runtime_error("the SfM's files could not be written");
   };
   EXPECT_THROW(RunPipeline(drive, options, callbacks), std::runtime_error);
+}
+
+// A surface thread that falls behind skips the keyframes that a replay queued after them
+// re-sculpts, and gives the same surfaces as one that kept up.
+TEST(PipelineShortDrive, ASurfaceThatFallsBehindSkipsWhatAReplayRedoesWithTheSameSurface) {
+  std::string error;
+  const std::filesystem::path folder = testing::ShortDrive(&error);
+  ASSERT_FALSE(folder.empty()) << error;
+  const Drive drive = Drive::Open(folder);
+  PipelineOptions options;
+  options.sfm.max_frames = 60;
+  options.sculptor.init_keyframes = 3;  // s known early: the skipping needs it
+  options.snapshot_every = 1;
+  PipelineCallbacks callbacks;
+  callbacks.snapshot = [](const PipelineSnapshot&) {};
+  options.skip_superseded_keyframes = false;  // every keyframe sculpted, however slow
+  const PipelineResult kept_up = RunPipeline(drive, options, callbacks);
+  EXPECT_EQ(kept_up.surface_keyframes_skipped, 0u);
+  options.skip_superseded_keyframes = true;
+  // The final adjustment's replay comes after the last keyframe.
+  ASSERT_FALSE(kept_up.loop_replay_keyframes.empty());
+  ASSERT_GE(kept_up.sfm.keyframes.size(), 4u);
+
+  // Each snapshot (on the surface thread) now takes longer than the SfM's whole run.
+  callbacks.snapshot = [](const PipelineSnapshot&) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  };
+  const PipelineResult behind = RunPipeline(drive, options, callbacks);
+  EXPECT_GT(behind.surface_keyframes_skipped, 0u);
+  EXPECT_LT(behind.surface_rows.size(), kept_up.surface_rows.size());
+  ASSERT_EQ(behind.sfm.keyframes.size(), kept_up.sfm.keyframes.size());
+  EXPECT_EQ(behind.mesh.vertices, kept_up.mesh.vertices);
+  EXPECT_EQ(behind.mesh.triangles, kept_up.mesh.triangles);
+  EXPECT_EQ(behind.closed_mesh.vertices, kept_up.closed_mesh.vertices);
+  EXPECT_EQ(behind.closed_mesh.triangles, kept_up.closed_mesh.triangles);
+  EXPECT_FALSE(behind.mesh.triangles.empty());
 }
 
 // reconstruct's sculptor differs from the surface command's where the SfM's own points asked

@@ -202,8 +202,13 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
       const auto supersedes = [&](const QueuedKeyframe& queued) {
         return options.skip_superseded_keyframes && queued.replay && sculptor->scale() > 0.0;
       };
-      const auto skip = [&result](const QueuedKeyframe& queued) {
+      const auto skip = [&](const QueuedKeyframe& queued) {
         result.surface_keyframes_skipped += queued.keyframes.size();
+        if (!queued.replay) return;
+        // A replay skipped for a later one keeps its number and its entry (0 s, 0 keyframes).
+        ++replay;
+        result.loop_replay_seconds.push_back(0.0);
+        result.loop_replay_keyframes.push_back(0);
       };
       while (std::optional<QueuedKeyframe> item = queue.PopLatest(supersedes, skip)) {
         const double waited =

@@ -113,7 +113,8 @@ struct PipelineResult {
   size_t queue_max_size = 0, queue_blocked_pushes = 0;
   double queue_blocked_seconds = 0.0;
   // Per loop closure: the surface time of the replay that followed it and the keyframes it
-  // re-sculpted.
+  // re-sculpted (0 and 0 when a later replay superseded it before it began); then the final
+  // adjustment's replay.
   std::vector<double> loop_replay_seconds;
   std::vector<size_t> loop_replay_keyframes;
   double replay_seconds = 0.0;  // surface time spent replaying after corrections

@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -94,7 +96,6 @@ TEST(PipelineShortDrive, ASurfaceThatFallsBehindSkipsWhatAReplayRedoesWithTheSam
   ASSERT_FALSE(folder.empty()) << error;
   const Drive drive = Drive::Open(folder);
   PipelineOptions options;
-  options.sfm.max_frames = 60;
   options.sculptor.init_keyframes = 3;  // s known early: the skipping needs it
   options.snapshot_every = 1;
   PipelineCallbacks callbacks;
@@ -103,16 +104,43 @@ TEST(PipelineShortDrive, ASurfaceThatFallsBehindSkipsWhatAReplayRedoesWithTheSam
   const PipelineResult kept_up = RunPipeline(drive, options, callbacks);
   EXPECT_EQ(kept_up.surface_keyframes_skipped, 0u);
   options.skip_superseded_keyframes = true;
-  // The final adjustment's replay comes after the last keyframe.
-  ASSERT_FALSE(kept_up.loop_replay_keyframes.empty());
-  ASSERT_GE(kept_up.sfm.keyframes.size(), 4u);
+  // The whole drive: a loop closure's replay, then the final adjustment's.
+  ASSERT_FALSE(kept_up.sfm.loop_closures.empty());
+  ASSERT_EQ(kept_up.loop_replay_keyframes.size(), kept_up.sfm.loop_closures.size() + 1);
+  EXPECT_EQ(kept_up.loop_replay_keyframes.back(), kept_up.sfm.keyframes.size());
 
-  // Each snapshot (on the surface thread) now takes longer than the SfM's whole run.
-  callbacks.snapshot = [](const PipelineSnapshot&) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  // The first snapshot (on the surface thread, after the first batch) waits until the SfM has
+  // finished and queued everything (a queue large enough for the whole drive): the loop
+  // closure's replay and the keyframes are then skipped for the final adjustment's replay.
+  std::mutex mutex;
+  std::condition_variable finished;
+  bool sfm_finished = false;
+  callbacks.sfm_finished = [&](const SfmRunResult&, double) {
+    std::lock_guard<std::mutex> lock(mutex);
+    sfm_finished = true;
+    finished.notify_all();
   };
+  callbacks.snapshot = [&](const PipelineSnapshot&) {
+    std::unique_lock<std::mutex> lock(mutex);
+    finished.wait_for(lock, std::chrono::minutes(2), [&] { return sfm_finished; });
+  };
+  options.queue_capacity = 1024;
   const PipelineResult behind = RunPipeline(drive, options, callbacks);
-  EXPECT_GT(behind.surface_keyframes_skipped, 0u);
+  ASSERT_TRUE(sfm_finished);
+  ASSERT_EQ(behind.sfm.keyframes.size(), kept_up.sfm.keyframes.size());
+  // The loop closure's replay and at least one keyframe handed over after the first three.
+  EXPECT_GT(behind.surface_keyframes_skipped, kept_up.loop_replay_keyframes[0]);
+  // One entry per replay, skipped (0 s, 0 keyframes) or not; the final one sculpted every
+  // keyframe.
+  ASSERT_EQ(behind.sfm.loop_closures.size(), kept_up.sfm.loop_closures.size());
+  ASSERT_EQ(behind.loop_replay_keyframes.size(), behind.sfm.loop_closures.size() + 1);
+  ASSERT_EQ(behind.loop_replay_seconds.size(), behind.loop_replay_keyframes.size());
+  EXPECT_EQ(behind.loop_replay_keyframes[0], 0u);
+  EXPECT_EQ(behind.loop_replay_seconds[0], 0.0);
+  EXPECT_EQ(behind.loop_replay_keyframes.back(), behind.sfm.keyframes.size());
+  ASSERT_FALSE(behind.surface_rows.empty());
+  EXPECT_EQ(behind.surface_rows.back().replay,
+            static_cast<int>(behind.loop_replay_keyframes.size()));
   EXPECT_LT(behind.surface_rows.size(), kept_up.surface_rows.size());
   ASSERT_EQ(behind.sfm.keyframes.size(), kept_up.sfm.keyframes.size());
   EXPECT_EQ(behind.mesh.vertices, kept_up.mesh.vertices);

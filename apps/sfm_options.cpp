@@ -34,8 +34,7 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
       ->add_option("--continuation-pool", o->continuation_pool,
                    "The frame before's tracks are continued among this many times --corners "
                    "corners of each image; the frame keeps those that continue a track, then the "
-                   "strongest others, up to --corners (1: none; default 0: 2 in non-central "
-                   "mode, 1 in central mode)")
+                   "strongest others, up to --corners (1: none; default 0: 2)")
       ->capture_default_str();
   command->add_flag(
       "--no-frame-points{false}", o->sfm.tracker.frame_points,

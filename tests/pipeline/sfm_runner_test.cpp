@@ -91,9 +91,9 @@ TEST(SfmRunnerOptions, FinalAdjustmentFreesTheTailSinceTheLastGlobalAdjustment) 
       << options.Check();
 }
 
-// The front end's pool of corners: on in non-central mode, off in central mode unless asked
-// for; the other front-end options pass through.
-TEST(SfmRunnerOptions, TheFrontEndContinuesTracksAmongAPoolInNonCentralModeOnly) {
+// The front end's pool of corners: on in both modes by default, off in central mode when
+// asked; the other front-end options pass through.
+TEST(SfmRunnerOptions, TheFrontEndContinuesTracksAmongAPoolInBothModesByDefault) {
   SfmRunnerOptions options;
   options.tracks.harris.max_corners = 123;
   options.tracks.continuation_pool = 2.5;
@@ -101,10 +101,13 @@ TEST(SfmRunnerOptions, TheFrontEndContinuesTracksAmongAPoolInNonCentralModeOnly)
   EXPECT_EQ(SfmFrontEndOptions(options).continuation_pool, 2.5);
   EXPECT_EQ(FrontEndHarrisOptions(SfmFrontEndOptions(options)).pool_corners, 308);
   options.tracker.central = true;
+  EXPECT_EQ(SfmFrontEndOptions(options).continuation_pool, 2.5);
+  EXPECT_EQ(FrontEndHarrisOptions(SfmFrontEndOptions(options)).pool_corners, 308);
+  EXPECT_EQ(SfmFrontEndOptions(options).harris.max_corners, 123);
+  options.continuation_pool_in_central_mode = false;
   EXPECT_EQ(SfmFrontEndOptions(options).continuation_pool, 1.0);
   EXPECT_EQ(FrontEndHarrisOptions(SfmFrontEndOptions(options)).pool_corners, 0);
-  EXPECT_EQ(SfmFrontEndOptions(options).harris.max_corners, 123);
-  options.continuation_pool_in_central_mode = true;
+  options.tracker.central = false;
   EXPECT_EQ(SfmFrontEndOptions(options).continuation_pool, 2.5);
 }
 

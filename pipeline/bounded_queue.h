@@ -38,13 +38,7 @@ class BoundedQueue {
 
   // Waits for an item; nothing once the queue is closed and empty.
   std::optional<T> Pop() {
-    std::unique_lock<std::mutex> lock(mutex_);
-    not_empty_.wait(lock, [&] { return closed_ || !items_.empty(); });
-    if (items_.empty()) return std::nullopt;
-    T item = std::move(items_.front());
-    items_.pop_front();
-    not_full_.notify_one();
-    return item;
+    return PopLatest([](const T&) { return false; }, [](const T&) {});
   }
 
   // Pop, except that when a queued item after the first satisfies `supersedes` (it makes every

@@ -142,7 +142,6 @@ TEST(PipelineShortDrive, ASurfaceThatFallsBehindSkipsWhatAReplayRedoesWithTheSam
   EXPECT_EQ(behind.surface_rows.back().replay,
             static_cast<int>(behind.loop_replay_keyframes.size()));
   EXPECT_LT(behind.surface_rows.size(), kept_up.surface_rows.size());
-  ASSERT_EQ(behind.sfm.keyframes.size(), kept_up.sfm.keyframes.size());
   EXPECT_EQ(behind.mesh.vertices, kept_up.mesh.vertices);
   EXPECT_EQ(behind.mesh.triangles, kept_up.mesh.triangles);
   EXPECT_EQ(behind.closed_mesh.vertices, kept_up.closed_mesh.vertices);

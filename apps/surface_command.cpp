@@ -355,7 +355,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       "closed manifold %s\n"
       "  observed: %zu triangles in %ld boundary loops, manifold with boundary %s; left out: "
       "%zu with a Steiner vertex, %zu long, %zu sparse, %zu unseen, %zu around touching "
-      "boundaries, %zu in small components\n"
+      "boundaries, %zu in small components; %zu long ones grown back\n"
       "  ms per incremental keyframe: median %.1f, p95 %.1f, max %.1f; max |E| %zu; smoothing "
       "when the surface was taken: %.1f ms (%zu vertices)\n"
       "  wrote %s, %s and %s\n",
@@ -363,10 +363,11 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       closed.triangles.size(), closed_report.ok ? "yes" : "NO", mesh.triangles.size(),
       report.boundary_loops, report.ok ? "yes" : "NO", observed_stats.steiner,
       observed_stats.long_edges, observed_stats.sparse, observed_stats.unseen,
-      observed_stats.manifold_repair, observed_stats.small_components, Quantile(ms, 0.5),
-      Quantile(ms, 0.95), ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()), max_e,
-      1e3 * smoothing.seconds, smoothing.vertices, (out / "surface.ply").c_str(),
-      (out / "surface_closed.ply").c_str(), (out / "stats" / "keyframes.csv").c_str());
+      observed_stats.manifold_repair, observed_stats.small_components, observed_stats.grown,
+      Quantile(ms, 0.5), Quantile(ms, 0.95),
+      ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()), max_e, 1e3 * smoothing.seconds,
+      smoothing.vertices, (out / "surface.ply").c_str(), (out / "surface_closed.ply").c_str(),
+      (out / "stats" / "keyframes.csv").c_str());
   // The run's summary (docs/errors.md, rule 3: its warnings too), written last.
   const nlohmann::json summary = {
       {"input", o.colmap.empty() ? o.from_gt : o.colmap},
@@ -510,6 +511,17 @@ void AddObservedMeshOptions(CLI::App* command, ObservedMeshOptions* observed) {
                    "surface.ply: keep a triangle whose longest edge subtends at most this angle "
                    "(radians) from the nearest ray centre of its vertices, whatever its length "
                    "(0: off)")
+      ->capture_default_str();
+  command
+      ->add_option("--observed-grow-max-edge", observed->grow_max_edge_factor,
+                   "surface.ply: a triangle left out by --observed-max-edge alone comes back "
+                   "when it continues a kept neighbour's plane (--observed-grow-angle) and its "
+                   "edges are at most this times s (0: off)")
+      ->capture_default_str();
+  command
+      ->add_option("--observed-grow-angle", observed->grow_max_normal_angle,
+                   "surface.ply: --observed-grow-max-edge's largest angle between the normals "
+                   "of neighbours (radians)")
       ->capture_default_str();
   command
       ->add_option("--observed-max-spacing", observed->max_spacing_factor,

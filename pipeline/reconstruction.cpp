@@ -38,10 +38,6 @@ SculptorOptions PipelineOptions::DefaultSculptor() {
   // holes of surface.ply and bound the closed δO better (F@0.5 +0.002 to +0.012 and the closed
   // q90 7 to 41 cm lower on nine drives and modes, docs/figures.md F59).
   sculptor.min_aperture_deg = 4.0;
-  // surface.ply leaves out the triangles with an edge longer than 1.75 s instead of 2 s: with
-  // the denser points of the frame points and the narrower aperture, the longer of them were
-  // mostly false matter (the tail 0.2 to 0.7 points lower, F@0.5 0 to 0.008 lower, F60).
-  sculptor.observed.max_edge_factor = 1.75;
   return sculptor;
 }
 

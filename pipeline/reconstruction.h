@@ -34,8 +34,7 @@ struct PipelineOptions {
   // surface is sculpted again in one batch after the SfM's final adjustment (a corrected map),
   // so the steps shape only the live surface, at about 0.7 of the surface thread's time
   // (docs/figures.md F53). Two rounds of enclosed free cells (enclosed_free_rounds, F58), the
-  // aperture bound at 4° (min_aperture_deg, F59) and surface.ply's edge bound at 1.75 s
-  // (observed.max_edge_factor, F60).
+  // aperture bound at 4° (min_aperture_deg, F59); surface.ply's as `surface`'s (F63).
   static SculptorOptions DefaultSculptor();
   SculptorOptions sculptor = DefaultSculptor();
   LoopReplay loop_replay = LoopReplay::kBatch;

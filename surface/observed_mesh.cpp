@@ -3,9 +3,11 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <numeric>
 #include <stdexcept>
+#include <unordered_map>
 
 #include "calib/error.h"
 
@@ -51,6 +53,52 @@ double EdgeLengthWithinAngle(const std::vector<Eigen::Vector3d>& p, const Eigen:
   return 2.0 * std::sqrt(nearest_squared) * std::sin(0.5 * angle);
 }
 
+enum TriangleState : char { kDropped, kKept, kCandidate };
+
+Eigen::Vector3d TriangleNormal(const std::vector<Eigen::Vector3d>& p, const Eigen::Vector3i& t) {
+  return (p[t[1]] - p[t[0]]).cross(p[t[2]] - p[t[0]]).normalized();
+}
+
+// Turns into kKept every kCandidate reached from a kKept triangle through shared edges between
+// triangles whose normals are within max_normal_angle; returns how many.
+size_t GrowAcrossEdges(const std::vector<Eigen::Vector3i>& triangles,
+                       const std::vector<Eigen::Vector3d>& p, double max_normal_angle,
+                       std::vector<char>* state) {
+  std::vector<char>& s = *state;
+  auto key = [](int from, int to) {
+    return (static_cast<uint64_t>(static_cast<uint32_t>(from)) << 32) | static_cast<uint32_t>(to);
+  };
+  // A candidate's directed edges: the triangle across edge a -> b holds b -> a.
+  std::unordered_map<uint64_t, int> candidate_with_edge;
+  for (size_t i = 0; i < triangles.size(); ++i) {
+    if (s[i] != kCandidate) continue;
+    for (int k = 0; k < 3; ++k)
+      candidate_with_edge[key(triangles[i][k], triangles[i][(k + 1) % 3])] = static_cast<int>(i);
+  }
+  if (candidate_with_edge.empty()) return 0;
+  const double min_cosine = std::cos(max_normal_angle);
+  std::vector<int> queue;
+  for (size_t i = 0; i < triangles.size(); ++i) {
+    if (s[i] == kKept) queue.push_back(static_cast<int>(i));
+  }
+  size_t grown = 0;
+  while (!queue.empty()) {
+    const int i = queue.back();
+    queue.pop_back();
+    const Eigen::Vector3i& t = triangles[i];
+    const Eigen::Vector3d normal = TriangleNormal(p, t);
+    for (int k = 0; k < 3; ++k) {
+      const auto across = candidate_with_edge.find(key(t[(k + 1) % 3], t[k]));
+      if (across == candidate_with_edge.end() || s[across->second] != kCandidate) continue;
+      if (normal.dot(TriangleNormal(p, triangles[across->second])) < min_cosine) continue;
+      s[across->second] = kKept;
+      ++grown;
+      queue.push_back(across->second);
+    }
+  }
+  return grown;
+}
+
 }  // namespace
 
 std::string ObservedMeshOptions::Check() const {
@@ -67,6 +115,12 @@ std::string ObservedMeshOptions::Check() const {
     return "observed.min_view_cosine must be in [-1, 1)";
   }
   if (min_component_triangles < 0) return "observed.min_component_triangles must be >= 0";
+  if (!(grow_max_edge_factor >= 0.0) || !std::isfinite(grow_max_edge_factor)) {
+    return "observed.grow_max_edge_factor must be >= 0 (0: off)";
+  }
+  if (!(grow_max_normal_angle > 0.0 && grow_max_normal_angle < M_PI)) {
+    return "observed.grow_max_normal_angle must be in (0, pi)";
+  }
   return "";
 }
 
@@ -174,11 +228,13 @@ TriangleMesh SelectObservedMesh(const TriangleMesh& closed,
     }
   }
 
-  std::vector<Eigen::Vector3i> kept;
-  kept.reserve(closed.triangles.size());
+  // Each triangle of δO: kept, a growth candidate (dropped for its edges alone), or dropped.
+  std::vector<char> state(closed.triangles.size(), kDropped);
   const double max_edge = options.max_edge_factor > 0.0 ? options.max_edge_factor * scale
                                                         : std::numeric_limits<double>::infinity();
-  for (const Eigen::Vector3i& t : closed.triangles) {
+  const double grow_max_edge = options.grow_max_edge_factor * scale;
+  for (size_t i = 0; i < closed.triangles.size(); ++i) {
+    const Eigen::Vector3i& t = closed.triangles[i];
     if (!vertices[t[0]].origins || !vertices[t[1]].origins || !vertices[t[2]].origins) {
       ++st.steiner;
       continue;
@@ -188,11 +244,15 @@ TriangleMesh SelectObservedMesh(const TriangleMesh& closed,
     const bool small_in_view =
         options.max_edge_angle > 0.0 &&
         longest <= EdgeLengthWithinAngle(p, t, vertices, options.max_edge_angle);
+    bool long_edges = false;
     if (longest > max_edge && !small_in_view) {
-      ++st.long_edges;
-      continue;
+      if (!(longest <= grow_max_edge)) {
+        ++st.long_edges;
+        continue;
+      }
+      long_edges = true;
     }
-    if (options.max_spacing_factor > 0.0 && !small_in_view) {
+    if (!long_edges && options.max_spacing_factor > 0.0 && !small_in_view) {
       const double local = std::max({spacing[t[0]], spacing[t[1]], spacing[t[2]]});
       if (longest > options.max_spacing_factor * local) {
         ++st.sparse;
@@ -200,7 +260,7 @@ TriangleMesh SelectObservedMesh(const TriangleMesh& closed,
       }
     }
     if (options.require_seen) {
-      const Eigen::Vector3d normal = (p[t[1]] - p[t[0]]).cross(p[t[2]] - p[t[0]]).normalized();
+      const Eigen::Vector3d normal = TriangleNormal(p, t);
       const Eigen::Vector3d centroid = (p[t[0]] + p[t[1]] + p[t[2]]) / 3.0;
       bool seen = false;
       for (int k = 0; k < 3 && !seen; ++k) {
@@ -213,11 +273,22 @@ TriangleMesh SelectObservedMesh(const TriangleMesh& closed,
         }
       }
       if (!seen) {
-        ++st.unseen;
+        ++(long_edges ? st.long_edges : st.unseen);
         continue;
       }
     }
-    kept.push_back(t);
+    state[i] = long_edges ? kCandidate : kKept;
+  }
+
+  if (grow_max_edge > 0.0) {
+    st.grown = GrowAcrossEdges(closed.triangles, p, options.grow_max_normal_angle, &state);
+  }
+
+  std::vector<Eigen::Vector3i> kept;
+  kept.reserve(closed.triangles.size());
+  for (size_t i = 0; i < closed.triangles.size(); ++i) {
+    if (state[i] == kKept) kept.push_back(closed.triangles[i]);
+    if (state[i] == kCandidate) ++st.long_edges;
   }
 
   st.manifold_repair = RepairTouchingBoundaries(&kept, n);

@@ -103,8 +103,12 @@ TEST(ObservedMesh, StreetHasNoSteinerVertexNoCeilingAndIsABoundedSubsetOfTheClos
   }
 
   // The ceiling over the street (between the wall tops, 16 m apart) and the caps at its ends
-  // are left out: no edge longer than max_edge_factor · s, all of them facing a ray centre.
-  const double max_edge = SculptorOptions().observed.max_edge_factor * sculptor.scale();
+  // are left out: no edge longer than 8 m, none longer than max_edge_factor · s but those the
+  // growth brought back (within grow_max_edge_factor · s), all of them facing a ray centre.
+  const ObservedMeshOptions defaults;
+  const double max_edge = defaults.grow_max_edge_factor * sculptor.scale();
+  ASSERT_GT(defaults.grow_max_edge_factor, defaults.max_edge_factor);
+  size_t long_observed = 0;
   size_t long_closed = 0;
   for (const Eigen::Vector3i& t : closed.triangles) {
     for (int k = 0; k < 3; ++k) {
@@ -113,10 +117,16 @@ TEST(ObservedMesh, StreetHasNoSteinerVertexNoCeilingAndIsABoundedSubsetOfTheClos
   }
   EXPECT_GT(long_closed, 0u);
   for (const Eigen::Vector3i& t : observed.triangles) {
+    double longest = 0.0;
     for (int k = 0; k < 3; ++k) {
-      EXPECT_LE((observed.vertices[t[k]] - observed.vertices[t[(k + 1) % 3]]).norm(), max_edge);
+      const double length = (observed.vertices[t[k]] - observed.vertices[t[(k + 1) % 3]]).norm();
+      EXPECT_LE(length, std::min(8.0, max_edge));
+      longest = std::max(longest, length);
     }
+    long_observed += longest > defaults.max_edge_factor * sculptor.scale();
   }
+  EXPECT_GT(stats.grown, 0u);
+  EXPECT_LE(long_observed, stats.grown);  // the repair may drop grown ones
 
   // Without any filter but the Steiner vertices it is still a bounded manifold subset.
   SculptorOptions loose = StreetOptions();
@@ -252,6 +262,79 @@ TEST(ObservedMesh, TheEdgeAngleKeepsFarTrianglesSmallInViewAndNotNearLongOnes) {
   EXPECT_TRUE(SelectObservedMesh(closed, vertices, 1.0, options).triangles.empty());
 }
 
+// A closed box 8 m long, 1 m wide and 4 m high whose floor is a strip of squares: four of 1 m
+// (diagonals 1.41 m) then one of 4 m (diagonal 4.12 m); its walls and roof have edges of 4 m
+// and more. At s = 1 and an edge bound of 2 s only the small squares pass; the growth brings
+// back the large square, which continues their plane, and never the walls at a right angle to
+// it, however long they may be.
+TEST(ObservedMesh, TheGrowthContinuesAPlaneAcrossLongEdgesAndStopsAtAFold) {
+  const std::vector<double> floor_x = {0, 1, 2, 3, 4, 8};
+  const int m = static_cast<int>(floor_x.size());
+  const double height = 4.0;
+  TriangleMesh closed;
+  for (double x : floor_x) closed.vertices.emplace_back(x, 0.0, 0.0);  // 0 .. m-1: y = 0
+  for (double x : floor_x) closed.vertices.emplace_back(x, 1.0, 0.0);  // m .. 2m-1: y = 1
+  const int t00 = 2 * m, t01 = t00 + 1, t10 = t00 + 2, t11 = t00 + 3;  // the roof's corners
+  closed.vertices.emplace_back(0.0, 0.0, height);
+  closed.vertices.emplace_back(0.0, 1.0, height);
+  closed.vertices.emplace_back(8.0, 0.0, height);
+  closed.vertices.emplace_back(8.0, 1.0, height);
+  auto b0 = [](int i) { return i; };
+  auto b1 = [m](int i) { return m + i; };
+  for (int i = 0; i + 1 < m; ++i) {  // the floor, facing down (outwards)
+    closed.triangles.emplace_back(b0(i), b1(i), b1(i + 1));
+    closed.triangles.emplace_back(b0(i), b1(i + 1), b0(i + 1));
+  }
+  closed.triangles.emplace_back(t00, t10, t11);  // the roof
+  closed.triangles.emplace_back(t00, t11, t01);
+  for (int i = 0; i + 1 < m; ++i) {  // the long walls, fans from the roof's corners
+    closed.triangles.emplace_back(t00, b0(i), b0(i + 1));
+    closed.triangles.emplace_back(t01, b1(i + 1), b1(i));
+  }
+  closed.triangles.emplace_back(t00, b0(m - 1), t10);
+  closed.triangles.emplace_back(t01, t11, b1(m - 1));
+  closed.triangles.emplace_back(b0(0), t00, t01);  // the end walls
+  closed.triangles.emplace_back(b0(0), t01, b1(0));
+  closed.triangles.emplace_back(b0(m - 1), b1(m - 1), t11);
+  closed.triangles.emplace_back(b0(m - 1), t11, t10);
+  ASSERT_TRUE(CheckMesh(closed).ok) << CheckMesh(closed).Summary();
+
+  const std::vector<Eigen::Vector3d> origins = {Eigen::Vector3d(4.0, 0.5, -3.0)};
+  const std::vector<ObservedVertex> vertices(closed.vertices.size(), ObservedVertex{&origins});
+  ObservedMeshOptions options;
+  options.max_edge_factor = 2.0;
+  options.require_seen = false;
+  ObservedMeshStats stats;
+  EXPECT_EQ(SelectObservedMesh(closed, vertices, 1.0, options, nullptr, &stats).triangles.size(),
+            8u);
+  EXPECT_EQ(stats.grown, 0u);
+
+  // Growth up to 4.6 m: the large square (4.12 m) joins; the end walls (4.12 m) and the first
+  // fans of the long walls (4.12 and 4.47 m) would pass the length but meet the floor at 90°.
+  options.grow_max_edge_factor = 4.6;
+  options.grow_max_normal_angle = 0.35;
+  std::vector<int> kept_vertices;
+  const TriangleMesh grown =
+      SelectObservedMesh(closed, vertices, 1.0, options, &kept_vertices, &stats);
+  EXPECT_EQ(grown.triangles.size(), 10u);
+  EXPECT_EQ(stats.grown, 2u);
+  EXPECT_EQ(kept_vertices, (std::vector<int>{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11}));
+  for (const Eigen::Vector3d& v : grown.vertices) EXPECT_EQ(v.z(), 0.0);
+  const MeshCheckReport report = CheckMesh(grown, Bounded());
+  EXPECT_TRUE(report.ok) << report.Summary();
+  EXPECT_EQ(report.boundary_loops, 1);
+
+  // Below the large square's diagonal, nothing grows.
+  options.grow_max_edge_factor = 4.0;
+  EXPECT_EQ(SelectObservedMesh(closed, vertices, 1.0, options, nullptr, &stats).triangles.size(),
+            8u);
+  // The fold is what stops it: at an angle of up to 100° the walls within 4.6 m grow too.
+  options.grow_max_edge_factor = 4.6;
+  options.grow_max_normal_angle = 1.75;
+  EXPECT_GT(SelectObservedMesh(closed, vertices, 1.0, options, nullptr, &stats).triangles.size(),
+            10u);
+}
+
 TEST(ObservedMeshOptions, CheckRejectsBadValues) {
   EXPECT_EQ(ObservedMeshOptions().Check(), "");
   ObservedMeshOptions o;
@@ -268,6 +351,12 @@ TEST(ObservedMeshOptions, CheckRejectsBadValues) {
   o = {};
   o.min_view_cosine = 1.0;
   EXPECT_NE(o.Check().find("observed.min_view_cosine"), std::string::npos);
+  o = {};
+  o.grow_max_edge_factor = -1.0;
+  EXPECT_NE(o.Check().find("observed.grow_max_edge_factor"), std::string::npos);
+  o = {};
+  o.grow_max_normal_angle = 0.0;
+  EXPECT_NE(o.Check().find("observed.grow_max_normal_angle"), std::string::npos);
   o = {};
   o.min_component_triangles = -1;
   EXPECT_NE(o.Check().find("observed.min_component_triangles"), std::string::npos);

@@ -31,6 +31,11 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "and 1000)")
       ->capture_default_str();
   command
+      ->add_option("--corner-quality", o->sfm.tracks.harris.quality_level,
+                   "A corner's Harris response is at least this share of the image's strongest "
+                   "(lower: more corners in weak texture)")
+      ->capture_default_str();
+  command
       ->add_option("--continuation-pool", o->continuation_pool,
                    "The frame before's tracks are continued among this many times --corners "
                    "corners of each image; the frame keeps those that continue a track, then the "
@@ -150,6 +155,9 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
                      "expected 0 (from the image size) or a factor of 1 or more");
   o->sfm.tracker.central = o->central ? true : o->non_central ? false : rig.central;
   if (o->corners < 0) throw InputError("", "--corners", "expected 0 (from the rig) or a count");
+  const double corner_quality = o->sfm.tracks.harris.quality_level;
+  if (!(corner_quality >= 0.0 && corner_quality < 1.0))
+    throw InputError("", "--corner-quality", "expected a share in [0, 1)");
   const double consensus = o->sfm.tracker.resection_consensus_angle_factor;
   if (consensus != 0.0 && !ValidConsensusAngleFactor(consensus))
     throw InputError("", "--resection-consensus", "expected 0 (from the mode) or 1 to 100");

@@ -275,6 +275,12 @@ TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
   EXPECT_EQ(testing::SplitText(consensus.err).size(), 1u) << consensus.err;
   EXPECT_NE(consensus.err.find("--resection-consensus"), std::string::npos) << consensus.err;
   EXPECT_FALSE(fs::exists(dir_->path() / "c"));
+  const testing::CommandResult quality = Run(
+      {"sfm", drive_.string(), "--out", (dir_->path() / "q").string(), "--corner-quality", "1"});
+  EXPECT_EQ(quality.exit_code, 2);
+  EXPECT_EQ(testing::SplitText(quality.err).size(), 1u) << quality.err;
+  EXPECT_NE(quality.err.find("--corner-quality"), std::string::npos) << quality.err;
+  EXPECT_FALSE(fs::exists(dir_->path() / "q"));
   const testing::CommandResult missing = Run(
       {"sfm", (dir_->path() / "no_such_drive").string(), "--out", (dir_->path() / "y").string()});
   EXPECT_EQ(missing.exit_code, 2);

@@ -423,6 +423,7 @@ SfmRunResult SfmRunner::Finish() {
   SfmRunResult& result = s.result;
   const TrackBuilderOptions front_end = SfmFrontEndOptions(s.options);
   result.corners_per_image = front_end.harris.max_corners;
+  result.corner_quality = front_end.harris.quality_level;
   result.continuation_pool = front_end.continuation_pool;
   if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {
     const auto ba_start = Clock::now();

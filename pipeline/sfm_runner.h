@@ -176,8 +176,10 @@ struct SfmRunResult {
   std::vector<SfmUntrackedRun> untracked_runs;  // after the first tracked frame
   SfmOutcome outcome = SfmOutcome::kNotInitialised;
   std::string outcome_reason;  // one line: what happened, for stderr and the run's summary
-  // The front end's corners per image and its pool (SfmFrontEndOptions: 1, none).
+  // The front end's corners per image, their least response (a share of the image's strongest)
+  // and its pool (SfmFrontEndOptions: 1, none).
   int corners_per_image = 0;
+  double corner_quality = 0.0;
   double continuation_pool = 1.0;
   // Where the map's scale comes from (Tracker::ScaleSource), and whether it is in metres.
   std::string scale_source;

@@ -32,8 +32,9 @@ struct HarrisOptions {
   double harris_k = 0.04;
   // A corner's response must be at least this share of the image's strongest response
   // (cv::goodFeaturesToTrack's usual 0.01). 0.003 lets the buckets of weak texture (plain walls,
-  // the ground) fill their share: a denser, more even surface on every drive measured, at about
-  // 1.3 times the keyframes' ATE on the short drives (docs/figures.md F64).
+  // the ground) fill their share: a denser, more even surface on every drive measured, at 1.2 to
+  // 1.3 times the keyframes' ATE on the multi-camera drives (the single camera's gain: its count
+  // was held far below the budget), docs/figures.md F64.
   double quality_level = 0.003;
   // Non-maximum suppression radius: kept corners are at least this far apart (pixels).
   int min_distance = 4;

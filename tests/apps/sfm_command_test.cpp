@@ -447,6 +447,7 @@ TEST(SfmCommand, TheCarRigOnTheTinyDriveIsMetric) {
   EXPECT_TRUE(summary.at("scale").at("metric").get<bool>()) << summary.at("scale");
   // Six cameras: 350 corners per image, continued among a pool of twice that (non-central).
   EXPECT_EQ(summary.at("front_end").at("corners_per_image").get<int>(), 350);
+  EXPECT_EQ(summary.at("front_end").at("corner_quality").get<double>(), 0.003);
   EXPECT_EQ(summary.at("front_end").at("continuation_pool").get<double>(), 2.0);
   // The resection's hypotheses from one camera's P3P, taken to the rig by that camera's offset:
   // the same.

@@ -303,11 +303,13 @@ TEST(ObservedMesh, TheGrowthContinuesAPlaneAcrossLongEdgesAndStopsAtAFold) {
   const std::vector<ObservedVertex> vertices(closed.vertices.size(), ObservedVertex{&origins});
   ObservedMeshOptions options;
   options.max_edge_factor = 2.0;
+  options.grow_max_edge_factor = 0.0;  // no growth
   options.require_seen = false;
   ObservedMeshStats stats;
   EXPECT_EQ(SelectObservedMesh(closed, vertices, 1.0, options, nullptr, &stats).triangles.size(),
             8u);
   EXPECT_EQ(stats.grown, 0u);
+  EXPECT_EQ(stats.long_edges, closed.triangles.size() - 8u);
 
   // Growth up to 4.6 m: the large square (4.12 m) joins; the end walls (4.12 m) and the first
   // fans of the long walls (4.12 and 4.47 m) would pass the length but meet the floor at 90°.

@@ -263,6 +263,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
           ? result.loop_replay_seconds.back()
           : 0.0;
   summary["frame_rate"] = o.sfm.frame_rate;
+  summary["profile"] = o.sfm.profile;
   summary["loop_replay"] = o.loop_replay;
   summary["enclosing"] = o.enclosing;
   summary["prefetch_frames_ahead"] = o.pipeline.sfm.prefetch.frames_ahead;

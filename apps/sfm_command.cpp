@@ -73,6 +73,7 @@ void RunSfmCommand(SfmCommandOptions& o, const GlobalOptions& global) {
   const SfmOutputs outputs = WriteSfmOutputs(drive, run, out, output_options);
   nlohmann::json summary = SfmSummaryJson(drive, run, outputs, o.sfm.sfm.tracker.central);
   summary["frame_rate"] = o.sfm.frame_rate;
+  summary["profile"] = o.sfm.profile;
   WriteTextFileAtomically(out / "sfm.json", summary.dump(2) + "\n");
   folder.Keep();
   const SfmStats& stats = outputs.stats;

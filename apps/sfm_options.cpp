@@ -13,8 +13,15 @@
 
 namespace omni {
 
-int CornersPerImage(int num_cameras) {
-  return std::clamp(2100 / std::max(1, num_cameras), 350, 1000);
+int CornersPerImage(int num_cameras, int budget_factor) {
+  return std::max(1, budget_factor) * std::clamp(2100 / std::max(1, num_cameras), 350, 1000);
+}
+
+SfmProfile SfmProfileNamed(const std::string& name) {
+  if (name == "realtime") return {name, 1, 0.3};
+  if (name == "accurate") return {name, 2, 0.3};
+  if (name == "offline") return {name, 2, 0.5};
+  throw InputError("", "--profile", "expected realtime, accurate or offline, got '" + name + "'");
 }
 
 void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
@@ -26,9 +33,17 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "from the image size, the longest side to about 640 pixels)")
       ->capture_default_str();
   command
+      ->add_option("--profile", o->profile,
+                   "How much work each frame gets: realtime (capture rate on 2 cores), accurate "
+                   "(twice the corners: about 1.6 times the time, a denser and more accurate map "
+                   "and surface) or offline (twice the corners and nearly every frame a "
+                   "keyframe: about 6 times the time, the most accurate poses); --corners and "
+                   "--min-tracked-share, when given, win")
+      ->capture_default_str();
+  command
       ->add_option("--corners", o->corners,
                    "Harris corners per image (default 0: 2100 over the rig's cameras, between 350 "
-                   "and 1000)")
+                   "and 1000; twice that with --profile accurate or offline)")
       ->capture_default_str();
   command
       ->add_option("--corner-quality", o->sfm.tracks.harris.quality_level,
@@ -47,8 +62,9 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
       "(default: triangulated from the tracked frames' poses and handed to the surface and "
       "points.ply, not to the map)");
   command
-      ->add_option("--min-tracked-share", o->sfm.tracker.keyframes.min_tracked_share,
-                   "Keyframe once fewer of the last keyframe's points are tracked")
+      ->add_option("--min-tracked-share", o->min_tracked_share,
+                   "Keyframe once fewer than this share of the last keyframe's points are tracked "
+                   "(default 0: 0.3, or 0.5 with --profile offline)")
       ->capture_default_str();
   auto* max_frames = command->add_option("--max-frames", o->sfm.max_frames, "0: the whole drive")
                          ->capture_default_str();
@@ -168,8 +184,14 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
     o->sfm.tracks.continuation_pool = o->continuation_pool;
     o->sfm.continuation_pool_in_central_mode = true;
   }
+  const SfmProfile profile = SfmProfileNamed(o->profile);
   o->sfm.tracks.harris.max_corners =
-      o->corners > 0 ? o->corners : CornersPerImage(rig.NumCameras());
+      o->corners > 0 ? o->corners : CornersPerImage(rig.NumCameras(), profile.corner_budget_factor);
+  if (!(o->min_tracked_share >= 0.0 && o->min_tracked_share < 1.0))
+    throw InputError("", "--min-tracked-share",
+                     "expected 0 (from the profile) or a share in (0, 1)");
+  o->sfm.tracker.keyframes.min_tracked_share =
+      o->min_tracked_share > 0.0 ? o->min_tracked_share : profile.min_tracked_share;
   if (o->downscale > 0.0) {
     o->sfm.tracks.harris.downscale = o->downscale;
   } else {

@@ -16,8 +16,12 @@ struct SfmCommandLine {
   double frame_rate = 15.0;  // timestamps of poses.tum: frame index / frame_rate
   // --downscale; 0: from the image size (WorkingDownscale of the largest camera image).
   double downscale = 0.0;
-  // --corners; 0: from the rig, CornersPerImage(number of cameras).
+  // --profile: how much work each frame gets (SfmProfile), for the options below left at 0.
+  std::string profile = "realtime";
+  // --corners; 0: from the rig and the profile, CornersPerImage(number of cameras, profile).
   int corners = 0;
+  // --min-tracked-share; 0: from the profile (SfmProfile::min_tracked_share).
+  double min_tracked_share = 0.0;
   // --continuation-pool; 0: SfmRunnerOptions' rule (the pool in non-central mode only).
   double continuation_pool = 0.0;
   // Central mode treats the camera centres as one point: a camera offset d seen at depth z
@@ -33,11 +37,29 @@ struct SfmCommandLine {
   SfmRunnerOptions sfm;
 };
 
+// What --profile sets, where --corners and --min-tracked-share are not given. The front end's
+// work per frame buys the map's density, and with it the surface's accuracy and the poses'
+// (docs/figures.md F65, the demo drive on 2 cores, non-central):
+// - realtime (the default): about 2100 corners per keyframe over the rig's cameras, a keyframe
+//   once 70 % of the last one's points are lost; about 27 frames/s.
+// - accurate: twice the corners; 1.6 times the time, the surface's pixel F@0.2 0.745 -> 0.786
+//   and its tail 3.6 -> 3.0 %, half the keyframes' error.
+// - offline: twice the corners and a keyframe once half the last one's points are lost (nearly
+//   every frame of a car's drive); 5.7 times the time, F@0.2 0.802, tail 2.6 %, and the
+//   keyframes' error within twice COLMAP 3.8's on the short drive's 60 frames.
+struct SfmProfile {
+  std::string name;
+  int corner_budget_factor = 1;    // times the rig's corner budget (CornersPerImage)
+  double min_tracked_share = 0.3;  // KeyframeOptions::min_tracked_share
+};
+// The profile of that name (realtime, accurate, offline); InputError naming --profile otherwise.
+SfmProfile SfmProfileNamed(const std::string& name);
+
 // Harris corners per image when --corners is not given: a keyframe's budget of about 2100
 // corners (the paper: about 2000 over six images) spread over the rig's cameras, between 350
 // and 1000 per image (a single camera has 1000: with 350 a phone photo kept too few matches,
-// with 700 its steps' directions were 3.5 degrees off).
-int CornersPerImage(int num_cameras);
+// with 700 its steps' directions were 3.5 degrees off), times the profile's factor.
+int CornersPerImage(int num_cameras, int budget_factor = 1);
 
 // Adds the SfM group to `command` (the values land in *options, which must outlive it).
 void AddSfmOptions(CLI::App* command, SfmCommandLine* options);

@@ -424,6 +424,7 @@ SfmRunResult SfmRunner::Finish() {
   const TrackBuilderOptions front_end = SfmFrontEndOptions(s.options);
   result.corners_per_image = front_end.harris.max_corners;
   result.corner_quality = front_end.harris.quality_level;
+  result.min_tracked_share = s.options.tracker.keyframes.min_tracked_share;
   result.continuation_pool = front_end.continuation_pool;
   if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {
     const auto ba_start = Clock::now();

@@ -16,6 +16,8 @@
 #   --cases LIST     comma-separated, from (default: reconstruct,reconstruct_nc,sfm,surface)
 #                      reconstruct     omnisculpt reconstruct --central on demo
 #                      reconstruct_nc  the same with --non-central (the rig's true offsets)
+#                      reconstruct_accurate, reconstruct_offline
+#                                      reconstruct_nc with --profile accurate / offline
 #                      sfm             omnisculpt sfm --central on demo
 #                      sfm_nc          omnisculpt sfm --non-central on demo
 #                      sfm_car         omnisculpt sfm on short with the car rig (non-central:
@@ -64,7 +66,7 @@ fi
 IFS=, read -r -a case_list <<< "$cases"
 for c in "${case_list[@]}"; do
   case "$c" in
-    reconstruct|reconstruct_nc|sfm|sfm_nc|sfm_car|surface) ;;
+    reconstruct|reconstruct_nc|reconstruct_accurate|reconstruct_offline|sfm|sfm_nc|sfm_car|surface) ;;
     *) echo "bench.sh: --cases: unknown case '$c' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -132,6 +134,9 @@ run_case() {  # build label case round
   case "$c" in
     reconstruct) drive="$drives/demo"; args=(reconstruct "$drive" --central --out "$folder") ;;
     reconstruct_nc) drive="$drives/demo"; args=(reconstruct "$drive" --non-central --out "$folder") ;;
+    reconstruct_accurate|reconstruct_offline)
+      drive="$drives/demo"
+      args=(reconstruct "$drive" --non-central --profile "${c#reconstruct_}" --out "$folder") ;;
     sfm) drive="$drives/demo"; args=(sfm "$drive" --central --out "$folder") ;;
     sfm_nc) drive="$drives/demo"; args=(sfm "$drive" --non-central --out "$folder") ;;
     sfm_car) drive="$drives/short_car"; args=(sfm "$drive" --out "$folder") ;;

@@ -42,10 +42,10 @@ struct SfmCommandLine {
 // (docs/figures.md F65, the demo drive on 2 cores, non-central):
 // - realtime (the default): about 2100 corners per keyframe over the rig's cameras, a keyframe
 //   once 70 % of the last one's points are lost; about 27 frames/s.
-// - accurate: twice the corners; 1.6 times the time, the surface's pixel F@0.2 0.745 -> 0.786
-//   and its tail 3.6 -> 3.0 %, half the keyframes' error.
+// - accurate: twice the corners; 1.7 times the time, the surface's pixel F@0.2 0.745 -> 0.786
+//   and its tail 3.6 -> 3.0 %, the keyframes' error 2.70 -> 1.39 cm.
 // - offline: twice the corners and a keyframe once half the last one's points are lost (nearly
-//   every frame of a car's drive); 5.7 times the time, F@0.2 0.802, tail 2.6 %, and the
+//   every frame of a car's drive); 6.5 times the time, F@0.2 0.802, tail 2.6 %, and the
 //   keyframes' error within twice COLMAP 3.8's on the short drive's 60 frames.
 struct SfmProfile {
   std::string name;

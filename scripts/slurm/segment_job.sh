@@ -1,21 +1,22 @@
 #!/usr/bin/env bash
 # Slurm batch script: one segment of a drive, one task of the array that scripts/slurm/submit.sh
-# submits (sbatch --array=0-(K-1) segment_job.sh OMNISCULPT DRIVE SHARED).
+# submits (sbatch --array=0-(K-1) segment_job.sh OMNISCULPT DRIVE SHARED [PROFILE]).
 # Task k reads its row "k first end" of SHARED/segments.tsv (frames first..end-1 of the drive,
 # by their index in the drive) and runs
-#   OMNISCULPT reconstruct DRIVE --frames first:end --out SHARED/segments/k --force
-# (--force: a requeued task replaces its own earlier reconstruction). It writes
+#   OMNISCULPT reconstruct DRIVE --frames first:end --out SHARED/segments/k --force --profile PROFILE
+# (--force: a requeued task replaces its own earlier reconstruction; PROFILE: realtime unless
+# given). It writes
 # SHARED/timing/segment_k.tsv (start and end, seconds since the epoch, the exit code, the node)
 # and exits with reconstruct's exit code, so a failed segment shows as FAILED in Slurm; the
 # merge job runs after the array whatever happened (afterany) and reports what is missing.
 #SBATCH --job-name=omni-segment
 set -uo pipefail
 me="segment_job.sh"
-if [ $# -ne 3 ]; then
-  echo "$me: error: usage: sbatch --array=0-(K-1) $me OMNISCULPT DRIVE SHARED" >&2
+if [ $# -ne 3 ] && [ $# -ne 4 ]; then
+  echo "$me: error: usage: sbatch --array=0-(K-1) $me OMNISCULPT DRIVE SHARED [PROFILE]" >&2
   exit 2
 fi
-omnisculpt="$1" drive="$2" shared="$3"
+omnisculpt="$1" drive="$2" shared="$3" profile="${4:-realtime}"
 task="${SLURM_ARRAY_TASK_ID:-}"
 if [ -z "$task" ]; then
   echo "$me: error: SLURM_ARRAY_TASK_ID is not set (submit it as an array: scripts/slurm/submit.sh)" >&2
@@ -31,8 +32,8 @@ read -r first end <<<"$row"
 out="$shared/segments/$task"
 mkdir -p "$shared/segments" "$shared/timing"
 start="$(date +%s.%N)"
-echo "$me: segment $task: frames $first:$end of $drive -> $out on $(hostname -s), job ${SLURM_JOB_ID:-?}, ${SLURM_CPUS_PER_TASK:-?} CPUs"
-"$omnisculpt" reconstruct "$drive" --frames "$first:$end" --out "$out" --force
+echo "$me: segment $task: frames $first:$end of $drive -> $out on $(hostname -s), job ${SLURM_JOB_ID:-?}, ${SLURM_CPUS_PER_TASK:-?} CPUs, profile $profile"
+"$omnisculpt" reconstruct "$drive" --frames "$first:$end" --out "$out" --force --profile "$profile"
 code=$?
 end_time="$(date +%s.%N)"
 printf 'start\tend\texit_code\tnode\n%s\t%s\t%s\t%s\n' "$start" "$end_time" "$code" "$(hostname -s)" \

@@ -5,6 +5,7 @@
 #
 # Usage: scripts/slurm/submit.sh DRIVE SHARED [--segments K] [--overlap F] [--cpus-per-task C]
 #          [--mem-per-task M] [--omnisculpt PATH] [--partition P] [--time T] [--merge-time T]
+#          [--profile realtime|accurate|offline]
 #   DRIVE   the drive folder (rig.json, images/<camera>/...), on a file system every node sees
 #   SHARED  a new or empty folder on such a file system: segments.tsv, segments/<k>/ (each
 #           segment's reconstruction), city/ (the merged map), logs/, timing/, jobs.env
@@ -15,6 +16,8 @@
 #   --omnisculpt PATH  the executable (default build/omnisculpt of this repository, else the one
 #                      on PATH); the nodes run it at that path
 #   --partition P, --time T (each task), --merge-time T (the merge job): passed to sbatch
+#   --profile P        each segment's `reconstruct --profile` (default realtime; accurate: twice
+#                      the corners, about 1.7 times the time; offline: about 6.5 times)
 # Segment k is frames [a_k, b_k) of the drive's N frames (images/<first camera of rig.json>/):
 # a_k = floor(k (N - F) / K), b_k = floor((k + 1) (N - F) / K) + F (b_(K-1) = N), so each shares F
 # frames with the next and only with its neighbours (F must not exceed the stride (N - F) / K).
@@ -34,9 +37,10 @@ omnisculpt=""
 partition=""
 time_limit=""
 merge_time=""
+profile="realtime"
 while [ $# -gt 0 ]; do
   case "$1" in
-    --segments | --overlap | --cpus-per-task | --mem-per-task | --omnisculpt | --partition | --time | --merge-time)
+    --segments | --overlap | --cpus-per-task | --mem-per-task | --omnisculpt | --partition | --time | --merge-time | --profile)
       [ $# -ge 2 ] || die "$1: expected a value"
       case "$1" in
         --segments) segments="$2" ;;
@@ -47,6 +51,7 @@ while [ $# -gt 0 ]; do
         --partition) partition="$2" ;;
         --time) time_limit="$2" ;;
         --merge-time) merge_time="$2" ;;
+        --profile) profile="$2" ;;
       esac
       shift 2
       ;;
@@ -69,6 +74,10 @@ is_count() { [[ "$1" =~ ^[0-9]+$ ]]; }
 is_count "$segments" && [ "$segments" -ge 1 ] || die "--segments: expected a whole number of at least 1, got '$segments'"
 is_count "$overlap" || die "--overlap: expected a whole number of frames, got '$overlap'"
 is_count "$cpus" && [ "$cpus" -ge 1 ] || die "--cpus-per-task: expected a whole number of at least 1, got '$cpus'"
+case "$profile" in
+  realtime | accurate | offline) ;;
+  *) die "--profile: expected realtime, accurate or offline, got '$profile'" ;;
+esac
 
 # The drive: rig.json's first camera and its image folder.
 [ -d "$drive" ] || die "$drive: no such drive folder"
@@ -148,7 +157,7 @@ merge_options=(--cpus-per-task="$cpus")
 submitted="$(date +%s.%N)"
 array_out="$(sbatch --parsable --array="0-$((segments - 1))" --job-name=omni-segment \
   --chdir="$shared" --output="$shared/logs/segment_%a.out" "${common[@]}" "${segment_options[@]}" \
-  "$here/segment_job.sh" "$omnisculpt" "$drive" "$shared" 2>&1)" || {
+  "$here/segment_job.sh" "$omnisculpt" "$drive" "$shared" "$profile" 2>&1)" || {
   undo_shared
   die "sbatch refused the segments' array job: $(echo "$array_out" | tr '\n' ' ')"
 }
@@ -165,7 +174,7 @@ merge_job="${merge_out%%;*}"
 printf 'ARRAY_JOB=%s\nMERGE_JOB=%s\nSEGMENTS=%s\nSUBMITTED=%s\n' "$array_job" "$merge_job" "$segments" "$submitted" \
   >"$shared/jobs.env"
 
-echo "$me: $drive: $frames frames in $segments segments overlapping by $overlap frames, $cpus CPUs per task"
+echo "$me: $drive: $frames frames in $segments segments overlapping by $overlap frames, $cpus CPUs per task, profile $profile"
 while IFS=$'\t' read -r k a b; do
   echo "  segment $k: frames $a:$b -> $shared/segments/$k"
 done < <(tail -n +2 "$shared/segments.tsv")

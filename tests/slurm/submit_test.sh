@@ -64,7 +64,7 @@ segments=4
 overlap=9
 shared="$work/shared"
 out="$(PATH="$bin:$PATH" bash "$submit" "$drive" "$shared" --segments "$segments" --overlap "$overlap" \
-  --cpus-per-task 3 --omnisculpt "$omnisculpt" --partition batch --time 10 2>&1)"
+  --cpus-per-task 3 --omnisculpt "$omnisculpt" --partition batch --time 10 --profile accurate 2>&1)"
 code=$?
 echo "$out"
 check "a good submission exits 0" [ "$code" = 0 ]
@@ -95,8 +95,8 @@ check "the array: --array=0-$((segments - 1))" has "$first_call" "--array=0-$((s
 check "the array: --parsable" has "$first_call" "--parsable"
 check "the array: --cpus-per-task=3, --partition=batch, --time=10" \
   bash -c 'grep -qxF -- --cpus-per-task=3 <<<"$1" && grep -qxF -- --partition=batch <<<"$1" && grep -qxF -- --time=10 <<<"$1"' _ "$first_call"
-check "the array runs segment_job.sh OMNISCULPT DRIVE SHARED" \
-  bash -c 'grep -A3 "segment_job.sh$" <<<"$1" | tail -n 3 | tr "\n" " " | grep -qF -- "$2 $3 $4 "' _ "$first_call" "$omnisculpt" "$drive" "$shared"
+check "the array runs segment_job.sh OMNISCULPT DRIVE SHARED PROFILE" \
+  bash -c 'grep -A4 "segment_job.sh$" <<<"$1" | tail -n 4 | tr "\n" " " | grep -qF -- "$2 $3 $4 accurate "' _ "$first_call" "$omnisculpt" "$drive" "$shared"
 check "the merge: --dependency=afterany:4101 (the array's id without ;cluster)" has "$second_call" "--dependency=afterany:4101"
 check "the merge runs merge_job.sh OMNISCULPT SHARED" \
   bash -c 'grep -A2 "merge_job.sh$" <<<"$1" | tail -n 2 | tr "\n" " " | grep -qF -- "$2 $3 "' _ "$second_call" "$omnisculpt" "$shared"
@@ -127,6 +127,7 @@ refuses "no rig.json" "rig.json: missing" "PATH=$bin:$PATH" -- "$work/no_rig" "$
 refuses "--segments 0" "--segments" "PATH=$bin:$PATH" -- "${good[@]}" --segments 0
 refuses "--segments x" "--segments" "PATH=$bin:$PATH" -- "${good[@]}" --segments x
 refuses "--overlap 0" "--overlap 0" "PATH=$bin:$PATH" -- "${good[@]}" --overlap 0
+refuses "--profile fast" "--profile" "PATH=$bin:$PATH" -- "${good[@]}" --profile fast
 # 4 segments of 103 frames overlapping by 21: stride (103 - 21) / 4 = 20 < 21.
 refuses "--overlap larger than the stride" "--overlap 21: too large" "PATH=$bin:$PATH" -- "${good[@]}" --overlap 21
 refuses "--overlap beyond the drive" "--overlap 500" "PATH=$bin:$PATH" -- "${good[@]}" --overlap 500

@@ -36,8 +36,8 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
       ->add_option(
           "--profile", o->profile,
           "How much work each frame gets: realtime (capture rate on 2 cores), accurate "
-          "(twice the corners: about 1.7 times the time, a denser and more accurate map "
-          "and surface) or offline (twice the corners and nearly every frame a "
+          "(twice the corners: about 1.7 times the time, a denser map and a more "
+          "accurate surface) or offline (twice the corners and nearly every frame a "
           "keyframe: about 6.5 times the time, the most accurate poses, for sfm); --corners and "
           "--min-tracked-share, when given, win")
       ->capture_default_str();

@@ -4,11 +4,11 @@
 # Task k reads its row "k first end" of SHARED/segments.tsv (frames first..end-1 of the drive,
 # by their index in the drive) and runs
 #   OMNISCULPT reconstruct DRIVE --frames first:end --out SHARED/segments/k --force --profile PROFILE
-# (--force: a requeued task replaces its own earlier reconstruction; PROFILE: realtime unless
-# given). It writes
-# SHARED/timing/segment_k.tsv (start and end, seconds since the epoch, the exit code, the node)
-# and exits with reconstruct's exit code, so a failed segment shows as FAILED in Slurm; the
-# merge job runs after the array whatever happened (afterany) and reports what is missing.
+# (--force: a requeued task replaces its own earlier reconstruction; PROFILE is realtime when not
+# given). It writes SHARED/timing/segment_k.tsv (start and end, seconds since the epoch, the
+# exit code, the node) and exits with reconstruct's exit code, so a failed segment shows as
+# FAILED in Slurm; the merge job runs after the array whatever happened (afterany) and reports
+# what is missing.
 #SBATCH --job-name=omni-segment
 set -uo pipefail
 me="segment_job.sh"

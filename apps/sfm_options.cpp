@@ -18,10 +18,13 @@ int CornersPerImage(int num_cameras, int budget_factor) {
 }
 
 SfmProfile SfmProfileNamed(const std::string& name) {
-  if (name == "realtime") return {name, 1, 0.3};
-  if (name == "accurate") return {name, 2, 0.3};
-  if (name == "offline") return {name, 2, 0.5};
-  throw InputError("", "--profile", "expected realtime, accurate or offline, got '" + name + "'");
+  SfmProfile profile;  // realtime: the defaults
+  if (name == "realtime") return profile;
+  if (name != "accurate" && name != "offline")
+    throw InputError("", "--profile", "expected realtime, accurate or offline, got '" + name + "'");
+  profile.corner_budget_factor = 2;
+  if (name == "offline") profile.min_tracked_share = 0.5;
+  return profile;
 }
 
 void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {

@@ -7,6 +7,7 @@
 #include "calib/drive.h"
 #include "calib/rig.h"
 #include "pipeline/sfm_runner.h"
+#include "sfm/keyframe_selection.h"
 
 namespace omni {
 
@@ -49,9 +50,9 @@ struct SfmCommandLine {
 //   keyframes' error within twice COLMAP 3.8's on the short drive's 60 frames. A profile for
 //   the poses: on the long paper drive its surface lost recall (F@0.5 0.857, accurate 0.888).
 struct SfmProfile {
-  std::string name;
-  int corner_budget_factor = 1;    // times the rig's corner budget (CornersPerImage)
-  double min_tracked_share = 0.3;  // KeyframeOptions::min_tracked_share
+  int corner_budget_factor = 1;  // times the rig's corner budget (CornersPerImage)
+  // KeyframeSelectionOptions::min_tracked_share (its default unless the profile changes it).
+  double min_tracked_share = KeyframeSelectionOptions{}.min_tracked_share;
 };
 // The profile of that name (realtime, accurate, offline); InputError naming --profile otherwise.
 SfmProfile SfmProfileNamed(const std::string& name);

@@ -180,7 +180,7 @@ struct SfmRunResult {
   // and its pool (SfmFrontEndOptions: 1, none).
   int corners_per_image = 0;
   double corner_quality = 0.0;
-  double min_tracked_share = 0.0;  // the keyframe rule's (KeyframeOptions::min_tracked_share)
+  double min_tracked_share = 0.0;  // the keyframe rule's (KeyframeSelectionOptions::min_tracked_share)
   double continuation_pool = 1.0;
   // Where the map's scale comes from (Tracker::ScaleSource), and whether it is in metres.
   std::string scale_source;

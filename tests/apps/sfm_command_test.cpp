@@ -316,31 +316,21 @@ TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
   EXPECT_EQ(hypotheses.exit_code, 2);
   EXPECT_EQ(testing::SplitText(hypotheses.err).size(), 1u) << hypotheses.err;
   EXPECT_FALSE(fs::exists(dir_->path() / "z"));
-  const testing::CommandResult consensus =
-      Run({"sfm", drive_.string(), "--out", (dir_->path() / "c").string(), "--resection-consensus",
-           "0.5"});
-  EXPECT_EQ(consensus.exit_code, 2);
-  EXPECT_EQ(testing::SplitText(consensus.err).size(), 1u) << consensus.err;
-  EXPECT_NE(consensus.err.find("--resection-consensus"), std::string::npos) << consensus.err;
-  EXPECT_FALSE(fs::exists(dir_->path() / "c"));
-  const testing::CommandResult quality = Run(
-      {"sfm", drive_.string(), "--out", (dir_->path() / "q").string(), "--corner-quality", "1"});
-  EXPECT_EQ(quality.exit_code, 2);
-  EXPECT_EQ(testing::SplitText(quality.err).size(), 1u) << quality.err;
-  EXPECT_NE(quality.err.find("--corner-quality"), std::string::npos) << quality.err;
-  EXPECT_FALSE(fs::exists(dir_->path() / "q"));
-  const testing::CommandResult profile =
-      Run({"sfm", drive_.string(), "--out", (dir_->path() / "p").string(), "--profile", "fast"});
-  EXPECT_EQ(profile.exit_code, 2);
-  EXPECT_EQ(testing::SplitText(profile.err).size(), 1u) << profile.err;
-  EXPECT_NE(profile.err.find("--profile"), std::string::npos) << profile.err;
-  EXPECT_FALSE(fs::exists(dir_->path() / "p"));
-  const testing::CommandResult share = Run(
-      {"sfm", drive_.string(), "--out", (dir_->path() / "m").string(), "--min-tracked-share", "1"});
-  EXPECT_EQ(share.exit_code, 2);
-  EXPECT_EQ(testing::SplitText(share.err).size(), 1u) << share.err;
-  EXPECT_NE(share.err.find("--min-tracked-share"), std::string::npos) << share.err;
-  EXPECT_FALSE(fs::exists(dir_->path() / "m"));
+  // A bad value of `option`: one error line naming it, exit 2, no output folder.
+  const auto expect_refused = [&](const std::string& option, const std::string& value,
+                                  const std::string& folder) {
+    SCOPED_TRACE(option + " " + value);
+    const testing::CommandResult result =
+        Run({"sfm", drive_.string(), "--out", (dir_->path() / folder).string(), option, value});
+    EXPECT_EQ(result.exit_code, 2);
+    EXPECT_EQ(testing::SplitText(result.err).size(), 1u) << result.err;
+    EXPECT_NE(result.err.find(option), std::string::npos) << result.err;
+    EXPECT_FALSE(fs::exists(dir_->path() / folder));
+  };
+  expect_refused("--resection-consensus", "0.5", "c");
+  expect_refused("--corner-quality", "1", "q");
+  expect_refused("--profile", "fast", "p");
+  expect_refused("--min-tracked-share", "1", "m");
   const testing::CommandResult missing = Run(
       {"sfm", (dir_->path() / "no_such_drive").string(), "--out", (dir_->path() / "y").string()});
   EXPECT_EQ(missing.exit_code, 2);

@@ -328,17 +328,21 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     rejected += st.points_rejected;
   }
   size_t filtered[4] = {0, 0, 0, 0};
+  size_t uncertain_rays = 0;
   for (const KeyframeStats& st : written_stats) {
     filtered[0] += st.points_invalid;
     filtered[1] += st.points_filtered_ground;
     filtered[2] += st.points_filtered_length;
     filtered[3] += st.points_filtered_aperture;
+    uncertain_rays += st.rays_uncertain;
   }
   std::printf(
       "surface: s = %.3f (keyframe spacing %.3f), r = %.2f, ground bound %.2f; points filtered "
-      "(paper §5.1): %zu invalid, %zu below the ground, %zu too far, %zu narrow aperture\n",
+      "(paper §5.1): %zu invalid, %zu below the ground, %zu too far, %zu narrow aperture (%zu "
+      "of their rays carve short of them)\n",
       sculptor.scale(), sculptor.keyframe_spacing(), written.ray_length_bound(),
-      written.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3]);
+      written.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3],
+      uncertain_rays);
   if (batch.sculptor) {
     std::printf(
         "surface: the final batch of all %zu keyframes at that s: %.2f s (the surface "
@@ -380,6 +384,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       {"points_filtered_ground", filtered[1]},
       {"points_filtered_length", filtered[2]},
       {"points_filtered_aperture", filtered[3]},
+      {"uncertain_rays", uncertain_rays},
       {"triangles", mesh.triangles.size()},
       {"manifold", report.ok},
       {"boundary_loops", report.boundary_loops},
@@ -469,6 +474,11 @@ void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
       ->add_option("--min-aperture", sculptor->min_aperture_deg,
                    "Aperture filter: keep a point only when two of its rays are more than this "
                    "many degrees apart (its triangulation angle)")
+      ->capture_default_str();
+  command
+      ->add_option("--uncertain-ray-margin", sculptor->uncertain_ray_margin_deg,
+                   "The rays of a point the aperture filter drops carve short of it, up to the "
+                   "fraction 1 - this / its aperture (degrees; 0: they do not carve)")
       ->capture_default_str();
   command
       ->add_option("--min-point-separation", sculptor->min_point_separation_factor,

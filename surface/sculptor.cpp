@@ -67,6 +67,9 @@ std::string SculptorOptions::Check() const {
   }
   if (enclosed_free_rounds < 1) return "enclosed_free_rounds must be >= 1";
   if (!(free_ray_length_factor >= 0.0)) return "free_ray_length_factor must be >= 0";
+  if (!(uncertain_ray_margin_deg >= 0.0)) return "uncertain_ray_margin_deg must be >= 0";
+  if (!(uncertain_ray_min_fraction > 0.0 && uncertain_ray_min_fraction < 1.0))
+    return "uncertain_ray_min_fraction must be in (0, 1)";
   // The parts' Check() name their fields with the prefix already ("genus.max_group_cells").
   for (const std::string& problem : {genus.Check(), smoothing.Check(), observed.Check()}) {
     if (!problem.empty()) return problem;
@@ -201,6 +204,8 @@ std::vector<std::pair<Point, const SurfacePoint*>> SpatiallySorted(
 }  // namespace
 
 struct IncrementalSculptor::Impl {
+  // A segment of a ray: its origin and its end.
+  using Segment = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
   SculptorOptions options;
   DelaunayMesh mesh;
   DelaunayMesh::Impl& t;  // T and O bookkeeping
@@ -384,6 +389,32 @@ struct IncrementalSculptor::Impl {
   }
 
   // Two rays of p more than min_aperture_deg apart (the aperture filter of §5.1).
+  // The widest angle between two rays of p (radians; 0 with fewer than two rays).
+  static double MaxApertureRad(const SurfacePoint& p) {
+    double min_cos = 1.0;
+    for (size_t i = 0; i < p.rays.size(); ++i) {
+      const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
+      for (size_t j = i + 1; j < p.rays.size(); ++j) {
+        min_cos = std::min(min_cos, a.dot((p.rays[j].origin - p.position).normalized()));
+      }
+    }
+    return std::acos(std::clamp(min_cos, -1.0, 1.0));
+  }
+
+  // SculptorOptions::uncertain_ray_margin_deg: the shortened rays of p (dropped by the aperture
+  // filter), appended to *segments as (origin, end).
+  void AddUncertainRays(const SurfacePoint& p, std::vector<Segment>* segments) const {
+    if (options.uncertain_ray_margin_deg <= 0.0 || segments == nullptr) return;
+    const double aperture = MaxApertureRad(p);
+    if (!(aperture > 0.0)) return;
+    const double fraction = 1.0 - options.uncertain_ray_margin_deg * M_PI / 180.0 / aperture;
+    if (!(fraction >= options.uncertain_ray_min_fraction)) return;
+    for (const SurfaceRay& ray : p.rays) {
+      if (!ray.origin.allFinite()) continue;
+      segments->push_back({ray.origin, ray.origin + fraction * (p.position - ray.origin)});
+    }
+  }
+
   bool WideAperture(const SurfacePoint& p) const {
     const double cos_min = std::cos(options.min_aperture_deg * M_PI / 180.0);
     for (size_t i = 0; i < p.rays.size(); ++i) {
@@ -438,7 +469,8 @@ struct IncrementalSculptor::Impl {
   }
 
   // The §5.1 filters; returns the points kept.
-  std::vector<const SurfacePoint*> Filter(const SurfaceKeyframe& kf, KeyframeStats& st) const {
+  std::vector<const SurfacePoint*> Filter(const SurfaceKeyframe& kf, KeyframeStats& st,
+                                          std::vector<Segment>* uncertain = nullptr) const {
     std::vector<const SurfacePoint*> kept;
     const Eigen::Vector3d up = options.up.normalized();
     // Each point is counted by the first filter that removes it.
@@ -454,6 +486,7 @@ struct IncrementalSculptor::Impl {
       if (size_t* count = removed_by(p)) {
         ++*count;
         ++st.points_filtered;
+        if (count == &st.points_filtered_aperture) AddUncertainRays(p, uncertain);
       } else {
         kept.push_back(&p);
       }
@@ -987,22 +1020,19 @@ struct IncrementalSculptor::Impl {
     return visited;
   }
 
-  // SurfaceKeyframe::free_rays: each walked from its origin up to free_ray_length_factor · r,
-  // incrementing the counters of the cells it crosses (as Trace).
-  void TraceFreeRays(const SurfaceKeyframe& kf, KeyframeStats& st) {
-    if (kf.free_rays.empty() || options.free_ray_length_factor == 0.0) return;
-    const double length = options.free_ray_length_factor * r;
-    std::vector<CellHandle> starts(kf.free_rays.size());
-    {
-      CellHandle hint = t.tri.locate(ToCgal(kf.centre));
-      for (size_t i = 0; i < kf.free_rays.size(); ++i) {
-        starts[i] = t.tri.locate(ToCgal(kf.free_rays[i].origin), hint);
-        hint = starts[i];
-      }
+  // Walks each segment from its origin to its end (located in T from `hint` on, then
+  // WalkFromInside), incrementing the counters of the cells it crosses (as Trace). Returns the
+  // number of cells the walks visited.
+  size_t TraceSegments(const std::vector<Segment>& segments, CellHandle hint) {
+    if (segments.empty() || t.tri.dimension() < 3) return 0;
+    std::vector<CellHandle> starts(segments.size());
+    for (size_t i = 0; i < segments.size(); ++i) {
+      starts[i] = t.tri.locate(ToCgal(segments[i].first), hint);
+      hint = starts[i];
     }
     std::atomic<size_t> became_free{0}, visited{0};
     const uint32_t date = stamp;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, kf.free_rays.size(), 64),
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, segments.size(), 64),
                       [&](const tbb::blocked_range<size_t>& range) {
                         size_t local = 0, cells = 0;
                         auto visit = [&](CellHandle c) {
@@ -1013,20 +1043,36 @@ struct IncrementalSculptor::Impl {
                           }
                         };
                         for (size_t i = range.begin(); i != range.end(); ++i) {
-                          const SurfaceFreeRay& ray = kf.free_rays[i];
-                          if (!ray.origin.allFinite() || !ray.direction.allFinite() ||
-                              !(ray.direction.norm() > 0.0))
-                            continue;
-                          t.WalkFromInside(ToCgal(ray.origin),
-                                           ToCgal(ray.origin + length * ray.direction.normalized()),
+                          t.WalkFromInside(ToCgal(segments[i].first), ToCgal(segments[i].second),
                                            starts[i], 2.0, visit);
                         }
                         became_free += local;
                         visited += cells;
                       });
     t.num_f += became_free;
+    return visited;
+  }
+
+  // SurfaceKeyframe::free_rays: each walked from its origin up to free_ray_length_factor · r.
+  void TraceFreeRays(const SurfaceKeyframe& kf, KeyframeStats& st) {
+    if (kf.free_rays.empty() || options.free_ray_length_factor == 0.0) return;
+    const double length = options.free_ray_length_factor * r;
+    std::vector<Segment> segments;
+    segments.reserve(kf.free_rays.size());
+    for (const SurfaceFreeRay& ray : kf.free_rays) {
+      if (!ray.origin.allFinite() || !ray.direction.allFinite() || !(ray.direction.norm() > 0.0))
+        continue;
+      segments.push_back({ray.origin, ray.origin + length * ray.direction.normalized()});
+    }
+    st.free_ray_cells += TraceSegments(segments, t.tri.locate(ToCgal(kf.centre)));
     st.rays_free += kf.free_rays.size();
-    st.free_ray_cells += visited;
+  }
+
+  // SculptorOptions::uncertain_ray_margin_deg: the shortened rays of the points the aperture
+  // filter dropped.
+  void TraceUncertainRays(const std::vector<Segment>& segments, KeyframeStats& st) {
+    st.uncertain_ray_cells += TraceSegments(segments, CellHandle());
+    st.rays_uncertain += segments.size();
   }
 
   // Puts the rays of the keyframe's points (traced) in the ray grid.
@@ -1279,9 +1325,10 @@ struct IncrementalSculptor::Impl {
     st.keyframes = group.size();
     single_tests_skipped = attempts_skipped = 0;
     std::vector<std::vector<const SurfacePoint*>> kept_of(group.size());
+    std::vector<Segment> uncertain;
     for (size_t g = 0; g < group.size(); ++g) {
       st.points_in += group[g]->points.size();
-      kept_of[g] = Filter(*group[g], st);
+      kept_of[g] = Filter(*group[g], st, &uncertain);
     }
 
     auto tick = Clock::now();
@@ -1393,6 +1440,7 @@ struct IncrementalSculptor::Impl {
     st.rays_new = tasks.size();
     TraceRays(tasks, n_cells, recs, st);
     for (const SurfaceKeyframe* kf : group) TraceFreeRays(*kf, st);
+    TraceUncertainRays(uncertain, st);
     for (KeyframeRecord& rec : recs) keyframes.push_back(std::move(rec));
     st.ms_rays = MsSince(tick);
 
@@ -1446,12 +1494,13 @@ struct IncrementalSculptor::Impl {
     for (const SurfaceKeyframe& kf : kfs) st.steiner_added += MaterialiseGrid(kf.centre);
     st.ms_steiner = MsSince(tick);
     tick = Clock::now();
+    std::vector<Segment> uncertain;
     for (const SurfaceKeyframe& kf : kfs) {
       st.points_in += kf.points.size();
       KeyframeRecord rec;
       rec.id = kf.id;
       rec.centre = kf.centre;
-      const auto kept = Filter(kf, st);
+      const auto kept = Filter(kf, st, &uncertain);
       const auto sorted = SpatiallySorted(kept);
       CellHandle hint = t.tri.locate(ToCgal(kf.centre));
       for (const auto& [pt, p] : sorted) {
@@ -1483,6 +1532,7 @@ struct IncrementalSculptor::Impl {
     st.rays_new = tasks.size();
     Trace(tasks, false);
     for (const SurfaceKeyframe& kf : kfs) TraceFreeRays(kf, st);
+    TraceUncertainRays(uncertain, st);
     for (const KeyframeRecord& kf : keyframes) RegisterRays(kf);
     st.ms_rays = MsSince(tick);
     tick = Clock::now();

@@ -237,6 +237,14 @@ struct SculptorOptions {
   // this times r, once, when their keyframe is sculpted (they are not re-traced over later new
   // cells). 0: ignored.
   double free_ray_length_factor = 1.0;
+  // The rays of a point that the aperture filter drops still carve, short of the point: its
+  // depth along a ray is uncertain by about its angular error over its aperture α (the widest
+  // angle between two of its rays), so each ray carves from its origin up to the fraction
+  // 1 − uncertain_ray_margin_deg / α of the way, once, when the keyframe is sculpted (not
+  // re-traced over later new cells); none when that fraction is below
+  // uncertain_ray_min_fraction. 0: off (the paper drops such points whole).
+  double uncertain_ray_margin_deg = 0.0;
+  double uncertain_ray_min_fraction = 0.25;
 
   std::string Check() const;
 };
@@ -313,6 +321,9 @@ struct KeyframeStats {
   // SurfaceKeyframe::free_rays traced, and the cells they crossed (inside ms_rays). Not in the
   // CSV row.
   size_t rays_free = 0, free_ray_cells = 0;
+  // SculptorOptions::uncertain_ray_margin_deg: the shortened rays of the points the aperture
+  // filter dropped, and the cells they crossed (inside ms_rays). Not in the CSV row.
+  size_t rays_uncertain = 0, uncertain_ray_cells = 0;
 };
 
 // Colours the vertices of a mesh of the sculptor (vertex_points from ExtractMesh or

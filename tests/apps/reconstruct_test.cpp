@@ -322,6 +322,43 @@ TEST(ReconstructShortDrive, TheBallEnclosingSetGivesAManifoldToo) {
   for (size_t r = 0; r < rounds.size(); ++r) EXPECT_EQ(rounds[r], 0) << rows[r + 1];
 }
 
+// The rays of the points that the aperture bound drops carve short of them by default
+// (SculptorOptions::uncertain_ray_margin_deg): against the same run without them (the SfM is
+// the same to the last bit, only the surface differs), surface.ply has fewer pixels whose
+// surface lies more than 1 m in front of the ground truth (1.7 % against 2.6 % when measured)
+// and a higher pixel F-score at 0.2 m, scored by `omnisculpt eval`; both surfaces manifolds.
+TEST(ReconstructShortDrive, TheRaysOfNarrowAperturePointsLowerTheFalseMatterInFront) {
+  const fs::path scratch = ScratchDir("uncertain_rays");
+  const fs::path drive(OMNI_SHORT_DRIVE_DIR);
+  auto reconstruct_and_eval = [&](const std::string& name, std::vector<std::string> extra) {
+    const fs::path out = scratch / name;
+    std::vector<std::string> args = {"--quiet", "reconstruct", drive.string(), "--out",
+                                     out.string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    auto run = RunOmnisculpt(args, scratch);
+    EXPECT_EQ(run.exit_code, 0) << run.err;
+    EXPECT_TRUE(CheckBounded(ReadPlyMesh(out / "surface.ply")).ok) << name;
+    EXPECT_TRUE(CheckMesh(ReadPlyMesh(out / "surface_closed.ply")).ok) << name;
+    run = RunOmnisculpt({"--quiet", "eval", "--gt", drive.string(), "--rec", out.string(),
+                         "--no-plots", "--no-renders"},
+                        scratch);
+    EXPECT_EQ(run.exit_code, 0) << run.err;
+    return nlohmann::json::parse(ReadTextFile(out / "report" / "eval.json"))["pixel"];
+  };
+  const nlohmann::json with = reconstruct_and_eval("default", {});
+  const nlohmann::json without =
+      reconstruct_and_eval("without", {"--uncertain-ray-margin", "0"});
+  const double front_with = with["tail_front"].get<double>();
+  const double front_without = without["tail_front"].get<double>();
+  const double f_with = with["precision_recall"][0]["f_score"].get<double>();
+  const double f_without = without["precision_recall"][0]["f_score"].get<double>();
+  ASSERT_EQ(with["precision_recall"][0]["threshold_m"].get<double>(), 0.2);
+  std::printf("in front above 1 m %.2f %% -> %.2f %%, pixel F@0.2 %.3f -> %.3f\n",
+              100 * front_without, 100 * front_with, f_without, f_with);
+  EXPECT_LT(front_with, front_without - 0.002);
+  EXPECT_GT(f_with, f_without);
+}
+
 TEST(ReconstructShortDrive, AKilledRunLeavesNothingThatLooksComplete) {
   const fs::path scratch = ScratchDir("killed");
   const fs::path out = scratch / "rec";

@@ -150,7 +150,7 @@ TEST(PipelineShortDrive, ASurfaceThatFallsBehindSkipsWhatAReplayRedoesWithTheSam
 }
 
 // reconstruct's sculptor differs from the surface command's where the SfM's own points asked
-// for it (docs/figures.md F53, F58, F59); surface.ply is taken the same way (F63).
+// for it (docs/figures.md F53, F58, F59, F66); surface.ply is taken the same way (F63).
 TEST(PipelineOptions, TheSculptorDefaultsOfReconstruct) {
   const SculptorOptions surface;
   const SculptorOptions reconstruct = PipelineOptions().sculptor;
@@ -160,6 +160,8 @@ TEST(PipelineOptions, TheSculptorDefaultsOfReconstruct) {
   EXPECT_EQ(reconstruct.enclosed_free_rounds, 2);
   EXPECT_EQ(surface.min_aperture_deg, 5.0);
   EXPECT_EQ(reconstruct.min_aperture_deg, 4.0);
+  EXPECT_EQ(surface.uncertain_ray_margin_deg, 0.0);
+  EXPECT_EQ(reconstruct.uncertain_ray_margin_deg, 0.1);
   EXPECT_EQ(surface.observed.max_edge_factor, 1.4);
   EXPECT_EQ(reconstruct.observed.max_edge_factor, 1.4);
   EXPECT_EQ(reconstruct.observed.grow_max_edge_factor, 4.0);

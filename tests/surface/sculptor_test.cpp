@@ -544,6 +544,79 @@ TEST(IncrementalSculptor, FreeRaysCarveTheCellsTheyCross) {
   EXPECT_GT(with, without);
 }
 
+// The rays of the points that the aperture filter drops carve short of them, up to
+// 1 − margin / aperture of the way: exactly the rays of the points with that fraction at least
+// uncertain_ray_min_fraction. Here a wall across the street 12 m ahead of each keyframe, seen
+// from origins 0.2 m apart (0.6° to 1°). O stays bounded by a closed 2-manifold with the space
+// behind the facades matter; in one batch (the same T whatever the margin) a smaller margin
+// walks longer segments of the same rays, so over more cells. None with the margin 0 (the
+// default).
+TEST(IncrementalSculptor, TheRaysOfPointsWithANarrowApertureCarveShortOfThem) {
+  std::vector<SurfaceKeyframe> stream = StreetStream(12);
+  std::vector<double> apertures;  // of the wall's points, radians
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  uint32_t id = 100000;
+  for (SurfaceKeyframe& kf : stream) {
+    for (int i = 0; i < 20; ++i) {
+      SurfacePoint p;
+      p.id = PointId(id++);
+      p.position = kf.centre + Eigen::Vector3d(12.0, -6.0 + 12.0 * u(rng), -4.0 + 8.0 * u(rng));
+      p.rays = {{kf.id, kf.centre}, {kf.id, kf.centre + Eigen::Vector3d(0, 0.2, 0)}};
+      const Eigen::Vector3d a = (p.rays[0].origin - p.position).normalized();
+      const Eigen::Vector3d b = (p.rays[1].origin - p.position).normalized();
+      apertures.push_back(std::acos(a.dot(b)));
+      kf.points.push_back(p);
+    }
+  }
+  auto sculpt = [&](double margin_deg, int init_keyframes, size_t* filtered, size_t* rays,
+                    size_t* cells) {
+    SculptorOptions options;
+    options.scale = 1.0;  // r = 15 m: no point is too far
+    options.init_keyframes = init_keyframes;
+    options.batch_with_known_scale = true;
+    options.uncertain_ray_margin_deg = margin_deg;
+    IncrementalSculptor sculptor(options);
+    *filtered = *rays = *cells = 0;
+    for (const KeyframeStats& st : Sculpt(sculptor, stream)) {
+      *filtered += st.points_filtered_aperture;
+      *rays += st.rays_uncertain;
+      *cells += st.uncertain_ray_cells;
+    }
+    EXPECT_EQ(sculptor.CheckInvariants(), "") << "margin " << margin_deg;
+    const TriangleMesh mesh = sculptor.ExtractMesh();
+    const MeshCheckReport report = CheckMesh(mesh);
+    EXPECT_TRUE(report.ok) << "margin " << margin_deg << ": " << report.Summary();
+    for (double x : {1.0, 2.5, 4.0}) {  // behind the facades: matter
+      EXPECT_NEAR(WindingNumber(mesh, Eigen::Vector3d(x, 10.5, 3.0)), 0.0, 1e-6);
+      EXPECT_NEAR(WindingNumber(mesh, Eigen::Vector3d(x, -10.5, 3.0)), 0.0, 1e-6);
+    }
+  };
+  size_t filtered = 0, rays = 0, cells = 0;
+  sculpt(0.0, 6, &filtered, &rays, &cells);  // a batch of 6, then 6 one by one
+  EXPECT_EQ(filtered, apertures.size());
+  EXPECT_EQ(rays, 0u);
+  EXPECT_EQ(cells, 0u);
+  const double margin_deg = 0.6;
+  size_t expected_rays = 0;
+  for (double aperture : apertures) {
+    const double fraction = 1.0 - margin_deg * M_PI / 180.0 / aperture;
+    if (fraction >= SculptorOptions().uncertain_ray_min_fraction) expected_rays += 2;
+  }
+  ASSERT_GT(expected_rays, 0u);
+  ASSERT_LT(expected_rays, 2 * apertures.size());  // some are too uncertain to carve
+  sculpt(margin_deg, 6, &filtered, &rays, &cells);
+  EXPECT_EQ(filtered, apertures.size());
+  EXPECT_EQ(rays, expected_rays);
+  EXPECT_GT(cells, rays);
+  size_t rays_wide = 0, cells_wide = 0, rays_narrow = 0, cells_narrow = 0;
+  sculpt(margin_deg, 12, &filtered, &rays_wide, &cells_wide);
+  sculpt(margin_deg / 2, 12, &filtered, &rays_narrow, &cells_narrow);
+  EXPECT_EQ(rays_wide, expected_rays);
+  EXPECT_EQ(rays_narrow, 2 * apertures.size());
+  EXPECT_GT(cells_narrow, cells_wide + (rays_narrow - rays_wide));
+}
+
 // A quarter of the street's points come twice, 4 nm apart (as in a COLMAP model): by default
 // each twin is the vertex of its original (a duplicate), so no two vertices of T share a
 // position once rounded to the float coordinates of a PLY file, and δO written as floats is
@@ -620,6 +693,14 @@ TEST(SculptorOptions, CheckRejectsBadValues) {
   EXPECT_NE(o.Check().find("keyframes_per_step"), std::string::npos);
   o.keyframes_per_step = 3;
   EXPECT_EQ(o.Check(), "");
+  o = SculptorOptions();
+  o.uncertain_ray_margin_deg = -0.1;
+  EXPECT_NE(o.Check().find("uncertain_ray_margin_deg"), std::string::npos);
+  o = SculptorOptions();
+  o.uncertain_ray_min_fraction = 1.0;
+  EXPECT_NE(o.Check().find("uncertain_ray_min_fraction"), std::string::npos);
+  o.uncertain_ray_min_fraction = 0.0;
+  EXPECT_NE(o.Check().find("uncertain_ray_min_fraction"), std::string::npos);
   o = SculptorOptions();
   o.min_point_separation_factor = -1e-3;
   EXPECT_NE(o.Check().find("min_point_separation_factor"), std::string::npos);

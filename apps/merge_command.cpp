@@ -37,16 +37,24 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
+SculptorOptions MergeSculptor() {
+  SculptorOptions sculptor;
+  sculptor.uncertain_ray_margin_deg = PipelineOptions::DefaultSculptor().uncertain_ray_margin_deg;
+  return sculptor;
+}
+
 struct MergeCommandOptions {
   std::vector<std::string> inputs;
   std::string out;
   bool force = false;
   MergeOptions merge;
   std::string enclosing = EnclosingName(SculptorOptions().enclosing);
-  SculptorOptions sculptor;
-  // --final-batch: the surface written is every keyframe sculpted again in one batch after the
-  // keyframe-by-keyframe sculpting (SculptFinalBatch), as `reconstruct` does.
-  bool final_batch = false;
+  // The SfM's points, sculpted as `reconstruct` sculpts them at the end: the rays of the points
+  // the aperture bound drops carve short of them, and (--final-batch, on unless
+  // --no-final-batch) the surface written is every keyframe sculpted again in one batch after
+  // the keyframe-by-keyframe sculpting (SculptFinalBatch). docs/figures.md F66.
+  SculptorOptions sculptor = MergeSculptor();
+  bool final_batch = true;
 };
 
 double SecondsSince(Clock::time_point start) {
@@ -164,6 +172,9 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   }
   WriteTextFileAtomically(out / "stats" / "keyframes.csv", csv.str());
   const double surface_seconds = SecondsSince(surface_start);
+  size_t uncertain_rays = 0;  // of the surface written
+  for (const KeyframeStats& st : batch.sculptor ? batch.stats : stats)
+    uncertain_rays += st.rays_uncertain;
   MeshCheckOptions bounded;
   bounded.allow_boundary = true;
   bounded.allow_empty = !closed.triangles.empty();
@@ -254,6 +265,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
       {"points_fused", merged.fused_points},
       {"keyframes", stream.size()},
       {"final_batch", {{"ran", batch.sculptor != nullptr}, {"seconds", batch.seconds}}},
+      {"uncertain_rays", uncertain_rays},
       {"triangles", mesh.triangles.size()},
       {"manifold", manifold.ok},
       {"closed_triangles", closed.triangles.size()},
@@ -311,9 +323,10 @@ void RegisterMergeCommand(CLI::App& app, const GlobalOptions& global) {
                    "Keyframes measuring s and sculpted in the first batch (paper §5.1); the "
                    "later ones one step at a time")
       ->capture_default_str();
-  command->add_flag("--final-batch", o->final_batch,
+  command->add_flag("--final-batch,!--no-final-batch", o->final_batch,
                     "Write a final batch instead of the surface sculpted keyframe by keyframe: "
-                    "every keyframe sculpted again at once at the first keyframes' s");
+                    "every keyframe sculpted again at once at the first keyframes' s")
+      ->capture_default_str();
   command
       ->add_option("--min-shared-frames", o->merge.min_shared_frames,
                    "An overlap is verified when at least this many shared frames agree with one "

@@ -50,7 +50,8 @@ struct SurfaceCommandOptions {
   bool no_batch = false;
   // After the stream, every keyframe sculpted again in one batch at the scale s of the first
   // keyframes, as `reconstruct` does after the SfM's final adjustment; that surface is written.
-  // Off: better on three of four perfect-SfM drives, a little worse on SfM points (F54).
+  // With --colmap (SfM points) on unless --no-final-batch, and with the uncertain rays of
+  // `reconstruct` unless --uncertain-ray-margin is given (F66); off with --from-gt (F54).
   bool final_batch = false;
   bool no_genus_refinement = false;  // step 6 (paper §4.6) parts switched off
   bool no_smoothing = false;
@@ -478,7 +479,8 @@ void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
   command
       ->add_option("--uncertain-ray-margin", sculptor->uncertain_ray_margin_deg,
                    "The rays of a point the aperture filter drops carve short of it, up to the "
-                   "fraction 1 - this / its aperture (degrees; 0: they do not carve)")
+                   "fraction 1 - this / its aperture (degrees; 0: they do not carve; an SfM's "
+                   "points, surface --colmap included: 0.1 unless given)")
       ->capture_default_str();
   command
       ->add_option("--min-point-separation", sculptor->min_point_separation_factor,
@@ -621,10 +623,11 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       ->add_option("--ray-grid-step", o->sculptor.ray_grid_step_factor,
                    "Voxel side of the grid of old rays (paper §4.4), in units of s")
       ->capture_default_str();
-  command->add_flag("--final-batch", o->final_batch,
-                    "Write a final batch instead of the surface sculpted keyframe by keyframe: "
-                    "every keyframe sculpted again at once at the first keyframes' s (as "
-                    "reconstruct after its final adjustment)");
+  CLI::Option* final_batch = command->add_flag(
+      "--final-batch,!--no-final-batch", o->final_batch,
+      "Write a final batch instead of the surface sculpted keyframe by keyframe: every keyframe "
+      "sculpted again at once at the first keyframes' s (as reconstruct after its final "
+      "adjustment); the default with --colmap, not with --from-gt");
   command->add_flag("--no-batch", o->no_batch,
                     "Sculpt the first keyframes one by one instead of in one batch (§5.1)");
   command->add_flag("--no-genus-refinement", o->no_genus_refinement,
@@ -680,7 +683,18 @@ void RegisterSurfaceCommand(CLI::App& app, const GlobalOptions& global) {
       "--uniform-points", [o] { o->gt.corner_points = false; },
       "--from-gt: sample points in uniform directions, not at the Harris corners "
       "of the keyframe images (the default when the drive has images)");
-  command->callback([o, &global] { RunSurface(*o, global); });
+  command->callback([o, &global, command, final_batch] {
+    // An SfM's points (a COLMAP model): sculpted as reconstruct sculpts its own, a final batch
+    // with the rays of the uncertain points (docs/figures.md F66), unless asked otherwise.
+    if (!o->colmap.empty()) {
+      if (final_batch->count() == 0) o->final_batch = true;
+      if (command->count("--uncertain-ray-margin") == 0) {
+        o->sculptor.uncertain_ray_margin_deg =
+            PipelineOptions::DefaultSculptor().uncertain_ray_margin_deg;
+      }
+    }
+    RunSurface(*o, global);
+  });
 }
 
 }  // namespace omni

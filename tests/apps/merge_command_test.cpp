@@ -194,10 +194,10 @@ TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
     EXPECT_EQ(ReadTextFile(city / file), ReadTextFile(city_again / file)) << file;
   }
   EXPECT_TRUE(fs::exists(city / "poses.tum"));
-  // --final-batch writes every keyframe sculpted again in one batch (here after a first batch
-  // of 10 and the others one by one), another closed surface of the same map than the one
-  // sculpted keyframe by keyframe (the default). Without --init-keyframes the map's keyframes
-  // are all in the first batch, and no final batch runs even when asked.
+  // --final-batch (the default) writes every keyframe sculpted again in one batch (here after a
+  // first batch of 10 and the others one by one), another closed surface of the same map than
+  // the one sculpted keyframe by keyframe (--no-final-batch). Without --init-keyframes the
+  // map's keyframes are all in the first batch, and no final batch runs even when asked.
   EXPECT_FALSE(summary["final_batch"]["ran"].get<bool>()) << summary.dump(2);
   EXPECT_TRUE(summary["manifold"].get<bool>());
   EXPECT_TRUE(summary["closed_manifold"].get<bool>());
@@ -205,20 +205,24 @@ TEST(MergeCommandShortDrive, SfmRunsOfSegmentsMergeToo) {
   const fs::path city_batch = scratch / "city_batch";
   const auto batch =
       RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(), (scratch / "b").string(),
-                     "--out", city_batch.string(), "--init-keyframes", "10", "--final-batch"},
+                     "--out", city_batch.string(), "--init-keyframes", "10"},
                     scratch);
   ASSERT_EQ(batch.exit_code, 0) << batch.err;
   const nlohmann::json batch_summary = ReadJson(city_batch / "merge.json");
   EXPECT_TRUE(batch_summary["final_batch"]["ran"].get<bool>()) << batch_summary.dump(2);
+  // The rays of the points the aperture bound drops carve short of them, as in reconstruct.
+  EXPECT_GT(batch_summary["uncertain_rays"].get<size_t>(), 0u) << batch_summary.dump(2);
   EXPECT_TRUE(batch_summary["closed_manifold"].get<bool>());
   const fs::path city_stream = scratch / "city_stream";
   const auto stream =
       RunOmnisculpt({"--quiet", "merge", (scratch / "a").string(), (scratch / "b").string(),
-                     "--out", city_stream.string(), "--init-keyframes", "10"},
+                     "--out", city_stream.string(), "--init-keyframes", "10", "--no-final-batch",
+                     "--uncertain-ray-margin", "0"},
                     scratch);
   ASSERT_EQ(stream.exit_code, 0) << stream.err;
   const nlohmann::json stream_summary = ReadJson(city_stream / "merge.json");
   EXPECT_FALSE(stream_summary["final_batch"]["ran"].get<bool>());
+  EXPECT_EQ(stream_summary["uncertain_rays"].get<size_t>(), 0u);
   EXPECT_TRUE(stream_summary["closed_manifold"].get<bool>());
   EXPECT_EQ(stream_summary["keyframes"], summary["keyframes"]);
   EXPECT_NE(ReadPlyMesh(city_stream / "surface_closed.ply").triangles,

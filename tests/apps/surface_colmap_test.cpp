@@ -183,6 +183,25 @@ TEST(ColmapKeyframes, SurfaceCommandSculptsAClosedManifoldFromAModel) {
   for (const Rgb8& color : closed.colors) {
     EXPECT_TRUE(color[2] == 77 || color == Rgb8(128, 128, 128));
   }
+  // An SfM's points are sculpted as reconstruct sculpts its own: the surface written is a final
+  // batch, with the rays of the points the aperture bound drops; --no-final-batch and a zero
+  // margin give the keyframe-by-keyframe surface of the paper.
+  const nlohmann::json summary = nlohmann::json::parse(std::ifstream(out / "surface.json"));
+  EXPECT_TRUE(summary["final_batch"]["ran"].get<bool>()) << summary.dump(2);
+  EXPECT_GT(summary["uncertain_rays"].get<size_t>(), 0u) << summary.dump(2);
+  const fs::path paper = dir / "paper";
+  const std::string paper_command =
+      std::string("'") + OMNI_EXECUTABLE + "' --quiet surface --colmap '" +
+      (dir / "model").string() + "' --out '" + paper.string() +
+      "' --no-batch --init-keyframes 4 --no-final-batch --uncertain-ray-margin 0 >'" +
+      (dir / "stdout.txt").string() + "' 2>&1";
+  ASSERT_EQ(std::system(paper_command.c_str()), 0);
+  const nlohmann::json paper_summary =
+      nlohmann::json::parse(std::ifstream(paper / "surface.json"));
+  EXPECT_FALSE(paper_summary["final_batch"]["ran"].get<bool>());
+  EXPECT_EQ(paper_summary["uncertain_rays"].get<size_t>(), 0u);
+  EXPECT_EQ(paper_summary["points_filtered_aperture"], summary["points_filtered_aperture"]);
+  EXPECT_TRUE(CheckMesh(ReadPlyMesh(paper / "surface_closed.ply")).ok);
   fs::remove_all(dir);
 }
 

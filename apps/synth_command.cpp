@@ -26,6 +26,7 @@ struct SynthCommandOptions {
   std::string rig_path;
   std::string rig_preset;  // empty: ladybug (or --rig)
   double image_scale = 0;  // 0: the preset's
+  double rig_height = 0;   // 0: the preset's
   int frame_step = 1;
   double exposure_spread = 0;
   double exposure_offset = 0;
@@ -65,6 +66,11 @@ void RunSynth(const SynthCommandOptions& command, const GlobalOptions& global) {
   }
   if (command.supersampling != 0) options.render.supersampling = command.supersampling;
   if (command.image_scale != 0) options.render.image_scale = command.image_scale;
+  if (command.rig_height != 0) {
+    if (!(command.rig_height > 0.5) || !(command.rig_height < 50.0))
+      throw InputError("", "--rig-height", "must be above 0.5 m and below 50 m");
+    options.trajectory.rig_height = command.rig_height;
+  }
   if (command.frame_step < 1) throw InputError("", "--frame-step", "must be at least 1");
   options.trajectory.frame_step = command.frame_step;
   if (command.exposure_spread < 0 || command.exposure_spread >= 0.9)
@@ -116,6 +122,9 @@ void RegisterSynthCommand(CLI::App& app, const GlobalOptions& global) {
   synth->add_option("--image-scale", command->image_scale,
                     "Scale every camera's size and intrinsics, e.g. 0.25 for quick car drives "
                     "(default: the preset's, 1)");
+  synth->add_option("--rig-height", command->rig_height,
+                    "Height of the rig's origin above the road, metres (default: the preset's, "
+                    "4: a mast as the paper's; a car's roof is about 2)");
   synth
       ->add_option("--frame-step", command->frame_step,
                    "Write one frame in K of the trajectory, named by its trajectory index, with "

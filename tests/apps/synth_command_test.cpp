@@ -77,11 +77,19 @@ TEST(SynthCommandTest, RigPresetsFrameStepAndExposureFromTheCommandLine) {
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.err.find("--frame-step"), std::string::npos) << result.err;
   EXPECT_FALSE(fs::exists(folder / "d"));
+  result = RunOmnisculpt({"synth", "--preset", "tiny", "--frames", "3", "--rig-height", "0.2",
+                          "--out", (folder / "d").string()},
+                         folder);
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_EQ(CountLines(result.err), 1) << result.err;
+  EXPECT_NE(result.err.find("--rig-height"), std::string::npos) << result.err;
+  EXPECT_FALSE(fs::exists(folder / "d"));
 
   const fs::path drive = folder / "fisheye";
   result = RunOmnisculpt({"--quiet", "synth", "--preset", "tiny", "--frames", "5", "--rig-preset",
                           "fisheye5", "--image-scale", "0.2", "--frame-step", "2",
-                          "--exposure-spread", "0.3", "--out", drive.string()},
+                          "--exposure-spread", "0.3", "--rig-height", "2", "--out",
+                          drive.string()},
                          folder);
   ASSERT_EQ(result.exit_code, 0) << result.err;
   const Rig rig = ReadRigJson(drive / "rig.json");
@@ -94,7 +102,11 @@ TEST(SynthCommandTest, RigPresetsFrameStepAndExposureFromTheCommandLine) {
   }
   EXPECT_FALSE(fs::exists(drive / "images" / "cam4" / "000001.png"));
   EXPECT_EQ(testing::SplitText(testing::ReadTextFile(drive / "frames.csv")).size(), 1u + 3u * 5u);
-  EXPECT_EQ(ReadTum(drive / "gt" / "poses.tum").size(), 3u);
+  const std::vector<StampedPose> poses = ReadTum(drive / "gt" / "poses.tum");
+  EXPECT_EQ(poses.size(), 3u);
+  for (const StampedPose& pose : poses) {  // the rig 2 m above the road (z = 0), give or take
+    EXPECT_NEAR(pose.world_from_rig.translation.z(), 2.0, 0.1);  // the suspension's bounce
+  }
   EXPECT_NE(testing::ReadTextFile(drive / "gt" / "scene.json").find("exposure_gains"),
             std::string::npos);
 

@@ -323,9 +323,10 @@ void RegisterMergeCommand(CLI::App& app, const GlobalOptions& global) {
                    "Keyframes measuring s and sculpted in the first batch (paper §5.1); the "
                    "later ones one step at a time")
       ->capture_default_str();
-  command->add_flag("--final-batch,!--no-final-batch", o->final_batch,
-                    "Write a final batch instead of the surface sculpted keyframe by keyframe: "
-                    "every keyframe sculpted again at once at the first keyframes' s")
+  command
+      ->add_flag("--final-batch,!--no-final-batch", o->final_batch,
+                 "Write a final batch instead of the surface sculpted keyframe by keyframe: "
+                 "every keyframe sculpted again at once at the first keyframes' s")
       ->capture_default_str();
   command
       ->add_option("--min-shared-frames", o->merge.min_shared_frames,

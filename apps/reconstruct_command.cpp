@@ -209,6 +209,13 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
     if (!row.surface.batch) surface_ms.push_back(MsPerKeyframe(row.surface));
     queue_ms.push_back(row.queue_ms);
   }
+  // The rays short of the uncertain points (SculptorOptions::uncertain_ray_margin_deg) in the
+  // last sculpting, the surface written (the last replay's rows, or the stream's).
+  size_t uncertain_rays = 0;
+  for (const PipelineKeyframeRow& row : result.surface_rows) {
+    if (row.replay == result.surface_rows.back().replay)
+      uncertain_rays += row.surface.rays_uncertain;
+  }
   const SfmStats& stats = outputs.stats;
   // surface.ply: an oriented 2-manifold with boundary; surface_closed.ply: closed.
   MeshCheckOptions bounded;
@@ -234,6 +241,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
       {"boundary_loops", manifold.boundary_loops},
       {"closed_triangles", result.closed_mesh.triangles.size()},
       {"closed_manifold", closed_manifold.ok},
+      {"uncertain_rays", uncertain_rays},
       {"seconds", result.seconds},
       {"frames_per_second", frames_per_second},
       {"surface_busy_seconds", result.surface_seconds},

@@ -342,8 +342,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       "(paper §5.1): %zu invalid, %zu below the ground, %zu too far, %zu narrow aperture (%zu "
       "of their rays carve short of them)\n",
       sculptor.scale(), sculptor.keyframe_spacing(), written.ray_length_bound(),
-      written.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3],
-      uncertain_rays);
+      written.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3], uncertain_rays);
   if (batch.sculptor) {
     std::printf(
         "surface: the final batch of all %zu keyframes at that s: %.2f s (the surface "

@@ -38,10 +38,10 @@ SculptorOptions PipelineOptions::DefaultSculptor() {
   // holes of surface.ply and bound the closed δO better (F@0.5 +0.002 to +0.012 and the closed
   // q90 7 to 41 cm lower on nine drives and modes, docs/figures.md F59).
   sculptor.min_aperture_deg = 4.0;
-  // The rays of the points that this bound drops (a third of the SfM's points on demo, most
-  // of them the frame points) still carve, 0.1° short of them: F@0.2 +0.004 to +0.015 and the
-  // errors above 1 m in front of the truth 0.4 to 0.9 points lower on six drives, the perfect
-  // SfM's points unchanged (`surface` keeps 0; docs/figures.md F66).
+  // The rays of the points that this bound drops (a third of the SfM's points on demo) still
+  // carve, 0.1° short of them: F@0.2 and F@0.5 higher on ten runs of ten (six drives, both
+  // modes) and the errors above 1 m in front of the truth lower on nine; `surface --from-gt`,
+  // whose points are exact, keeps 0 (docs/figures.md F66).
   sculptor.uncertain_ray_margin_deg = 0.1;
   return sculptor;
 }

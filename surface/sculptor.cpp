@@ -388,7 +388,6 @@ struct IncrementalSculptor::Impl {
     grid_origin = first.front().centre + step * Eigen::Vector3d(0.3183, 0.2718, 0.1414);
   }
 
-  // Two rays of p more than min_aperture_deg apart (the aperture filter of §5.1).
   // The widest angle between two rays of p (radians; 0 with fewer than two rays).
   static double MaxApertureRad(const SurfacePoint& p) {
     double min_cos = 1.0;
@@ -415,6 +414,7 @@ struct IncrementalSculptor::Impl {
     }
   }
 
+  // Two rays of p more than min_aperture_deg apart (the aperture filter of §5.1).
   bool WideAperture(const SurfacePoint& p) const {
     const double cos_min = std::cos(options.min_aperture_deg * M_PI / 180.0);
     for (size_t i = 0; i < p.rays.size(); ++i) {

@@ -339,6 +339,8 @@ TEST(ReconstructShortDrive, TheRaysOfNarrowAperturePointsLowerTheFalseMatterInFr
     EXPECT_EQ(run.exit_code, 0) << run.err;
     EXPECT_TRUE(CheckBounded(ReadPlyMesh(out / "surface.ply")).ok) << name;
     EXPECT_TRUE(CheckMesh(ReadPlyMesh(out / "surface_closed.ply")).ok) << name;
+    const nlohmann::json summary = nlohmann::json::parse(ReadTextFile(out / "reconstruct.json"));
+    EXPECT_EQ(summary["uncertain_rays"].get<size_t>() > 0, extra.empty()) << name;
     run = RunOmnisculpt({"--quiet", "eval", "--gt", drive.string(), "--rec", out.string(),
                          "--no-plots", "--no-renders"},
                         scratch);
@@ -346,8 +348,7 @@ TEST(ReconstructShortDrive, TheRaysOfNarrowAperturePointsLowerTheFalseMatterInFr
     return nlohmann::json::parse(ReadTextFile(out / "report" / "eval.json"))["pixel"];
   };
   const nlohmann::json with = reconstruct_and_eval("default", {});
-  const nlohmann::json without =
-      reconstruct_and_eval("without", {"--uncertain-ray-margin", "0"});
+  const nlohmann::json without = reconstruct_and_eval("without", {"--uncertain-ray-margin", "0"});
   const double front_with = with["tail_front"].get<double>();
   const double front_without = without["tail_front"].get<double>();
   const double f_with = with["precision_recall"][0]["f_score"].get<double>();

@@ -196,8 +196,7 @@ TEST(ColmapKeyframes, SurfaceCommandSculptsAClosedManifoldFromAModel) {
       "' --no-batch --init-keyframes 4 --no-final-batch --uncertain-ray-margin 0 >'" +
       (dir / "stdout.txt").string() + "' 2>&1";
   ASSERT_EQ(std::system(paper_command.c_str()), 0);
-  const nlohmann::json paper_summary =
-      nlohmann::json::parse(std::ifstream(paper / "surface.json"));
+  const nlohmann::json paper_summary = nlohmann::json::parse(std::ifstream(paper / "surface.json"));
   EXPECT_FALSE(paper_summary["final_batch"]["ran"].get<bool>());
   EXPECT_EQ(paper_summary["uncertain_rays"].get<size_t>(), 0u);
   EXPECT_EQ(paper_summary["points_filtered_aperture"], summary["points_filtered_aperture"]);

@@ -88,8 +88,7 @@ TEST(SynthCommandTest, RigPresetsFrameStepAndExposureFromTheCommandLine) {
   const fs::path drive = folder / "fisheye";
   result = RunOmnisculpt({"--quiet", "synth", "--preset", "tiny", "--frames", "5", "--rig-preset",
                           "fisheye5", "--image-scale", "0.2", "--frame-step", "2",
-                          "--exposure-spread", "0.3", "--rig-height", "2", "--out",
-                          drive.string()},
+                          "--exposure-spread", "0.3", "--rig-height", "2", "--out", drive.string()},
                          folder);
   ASSERT_EQ(result.exit_code, 0) << result.err;
   const Rig rig = ReadRigJson(drive / "rig.json");

@@ -323,11 +323,10 @@ void RegisterMergeCommand(CLI::App& app, const GlobalOptions& global) {
                    "Keyframes measuring s and sculpted in the first batch (paper §5.1); the "
                    "later ones one step at a time")
       ->capture_default_str();
-  command
-      ->add_flag("--final-batch,!--no-final-batch", o->final_batch,
-                 "Write a final batch instead of the surface sculpted keyframe by keyframe: "
-                 "every keyframe sculpted again at once at the first keyframes' s")
-      ->capture_default_str();
+  command->add_flag("--final-batch,!--no-final-batch", o->final_batch,
+                    "Write a final batch instead of the surface sculpted keyframe by keyframe: "
+                    "every keyframe sculpted again at once at the first keyframes' s (the "
+                    "default; --no-final-batch: the keyframe-by-keyframe surface)");
   command
       ->add_option("--min-shared-frames", o->merge.min_shared_frames,
                    "An overlap is verified when at least this many shared frames agree with one "

@@ -79,6 +79,20 @@ SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mo
   return options;
 }
 
+double ReplayScale(double scale, double reference_spacing,
+                   const std::vector<SurfaceKeyframe>& keyframes, size_t count, double max_change,
+                   double* new_spacing) {
+  const size_t n = std::min(count, keyframes.size());
+  double sum = 0.0;
+  for (size_t i = 1; i < n; ++i) sum += (keyframes[i].centre - keyframes[i - 1].centre).norm();
+  const double spacing = n > 1 ? sum / static_cast<double>(n - 1) : 0.0;
+  if (new_spacing) *new_spacing = spacing;
+  if (!(scale > 0.0) || !(reference_spacing > 0.0) || !(spacing > 0.0)) return scale;
+  const double ratio = spacing / reference_spacing;
+  if (ratio <= max_change && ratio >= 1.0 / max_change) return scale;
+  return scale * ratio;
+}
+
 FinalBatch SculptFinalBatch(const SculptorOptions& base, const IncrementalSculptor& streamed,
                             const std::vector<KeyframeStats>& streamed_stats,
                             const std::vector<SurfaceKeyframe>& keyframes) {
@@ -211,15 +225,31 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
         result.loop_replay_seconds.push_back(0.0);
         result.loop_replay_keyframes.push_back(0);
       };
+      // The first sculptor's keyframe spacing, which its s was measured with (the reference of
+      // ReplayScale).
+      double reference_spacing = 0.0;
       while (std::optional<QueuedKeyframe> item = queue.PopLatest(supersedes, skip)) {
         const double waited =
             std::chrono::duration<double, std::milli>(Clock::now() - item->pushed).count();
         const auto busy = Clock::now();
         if (item->replay) {
-          // The map was corrected: sculpt the corrected keyframes from scratch.
+          // The map was corrected: sculpt the corrected keyframes from scratch, at the first
+          // sculpting's s unless the correction rescaled the map.
           ++replay;
+          if (reference_spacing == 0.0) reference_spacing = sculptor->keyframe_spacing();
+          double spacing = 0.0;
+          const double scale =
+              ReplayScale(sculptor->scale(), reference_spacing, item->keyframes,
+                          static_cast<size_t>(options.sculptor.init_keyframes), 1.25, &spacing);
+          if (scale != sculptor->scale()) {
+            spdlog::warn(
+                "surface: the corrected map's keyframes are {:.3g} times as far apart as when s "
+                "was measured (the SfM's map was rescaled): s {:.4g} -> {:.4g}",
+                spacing / reference_spacing, sculptor->scale(), scale);
+            reference_spacing = spacing;
+          }
           sculptor = std::make_unique<IncrementalSculptor>(ReplaySculptorOptions(
-              options.sculptor, options.loop_replay, sculptor->scale(), item->keyframes.size()));
+              options.sculptor, options.loop_replay, scale, item->keyframes.size()));
           keyframes_sculpted = 0;
         }
         for (const SurfaceKeyframe& keyframe : item->keyframes) {

@@ -131,6 +131,17 @@ struct PipelineResult {
 PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
                            const PipelineCallbacks& callbacks = {});
 
+// The s of a replay when the correction changed the map's scale: the first sculptor measured
+// `scale` on keyframes whose centres were `reference_spacing` apart on average; the replay's
+// first `count` keyframes (the same ones, corrected) are compared with that spacing, and when
+// the ratio is outside [1 / max_change, max_change] (an SfM whose map was rescaled, not a loop
+// closure's usual correction of a percent) s follows it, so that the bounds and the Steiner
+// grid keep their meaning in the new units. Otherwise `scale`, unchanged. *new_spacing: the
+// replay's spacing (the reference of the next replay when s changed).
+double ReplayScale(double scale, double reference_spacing,
+                   const std::vector<SurfaceKeyframe>& keyframes, size_t count,
+                   double max_change = 1.25, double* new_spacing = nullptr);
+
 // The options of the sculptor that replays the `keyframes` corrected keyframes after a loop
 // closure, the first sculptor having measured `scale` (0: not yet known). kBatch with s known:
 // all of them in one batch at that s, then one by one; otherwise `base` (s measured again).

@@ -122,5 +122,50 @@ TEST(PipelineReplay, ABatchReplayKeepsTheFirstScaleAndGivesAManifold) {
   EXPECT_TRUE(CheckMesh(incremental.mesh).ok);
 }
 
+// A correction that rescales the map (an SfM whose scale jumped, by thousands on one drive of
+// the quality set): the replay's s follows the keyframes' spacing, so the replay of the map ten
+// times larger keeps the same points as the replay of the map as it was; at the first s it
+// would drop most of them as too far. A loop closure's usual correction (7 %) keeps s.
+TEST(PipelineReplay, AReplayFollowsAMapThatWasRescaled) {
+  const std::vector<SurfaceKeyframe> drive = testing::NoisyStreet(36, 120, 0.02, 7);
+  SculptorOptions options;
+  options.init_keyframes = 10;
+  IncrementalSculptor first(options);
+  for (size_t k = 0; k < 30; ++k) first.AddKeyframe(drive[k]);
+  ASSERT_NEAR(first.scale(), 1.0, 1e-9);
+  ASSERT_NEAR(first.keyframe_spacing(), 1.0, 1e-9);
+  const size_t count = static_cast<size_t>(options.init_keyframes);
+  double spacing = 0.0;
+  EXPECT_EQ(ReplayScale(first.scale(), first.keyframe_spacing(), Corrected(drive, 1.07), count,
+                        1.25, &spacing),
+            first.scale());
+  EXPECT_NEAR(spacing, 1.07, 1e-9);
+  const std::vector<SurfaceKeyframe> larger = Corrected(drive, 10.0);
+  const double rescaled = ReplayScale(first.scale(), first.keyframe_spacing(), larger, count);
+  EXPECT_NEAR(rescaled, 10.0, 1e-9);
+  EXPECT_NEAR(ReplayScale(first.scale(), first.keyframe_spacing(), Corrected(drive, 0.002), count),
+              0.002, 1e-12);
+  EXPECT_EQ(ReplayScale(0.0, first.keyframe_spacing(), larger, count), 0.0);  // s not known yet
+  EXPECT_EQ(ReplayScale(first.scale(), 0.0, larger, count), first.scale());   // no reference
+
+  // The points the replay inserts; its surface checked where s fits the map.
+  auto added = [&](const std::vector<SurfaceKeyframe>& map, double scale, bool check) {
+    IncrementalSculptor replay(ReplaySculptorOptions(options, LoopReplay::kBatch, scale, 30));
+    size_t points = 0;
+    for (size_t k = 0; k < 30; ++k)
+      for (const KeyframeStats& row : replay.AddKeyframe(map[k])) points += row.points_added;
+    for (const KeyframeStats& row : replay.Finish()) points += row.points_added;
+    if (check) {
+      EXPECT_EQ(replay.CheckInvariants(), "");
+      EXPECT_TRUE(CheckMesh(replay.ExtractMesh()).ok);
+    }
+    return points;
+  };
+  const size_t as_it_was = added(Corrected(drive, 1.0), first.scale(), true);
+  EXPECT_GT(as_it_was, 1000u);
+  EXPECT_EQ(added(larger, rescaled, true), as_it_was);
+  EXPECT_LT(added(larger, first.scale(), false), as_it_was / 2);
+}
+
 }  // namespace
 }  // namespace omni

@@ -205,14 +205,12 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
   WriteTextFileAtomically(partial / "stats" / "keyframes.csv", keyframes_csv.str());
 
   std::vector<double> surface_ms, queue_ms;
-  for (const PipelineKeyframeRow& row : result.surface_rows) {
-    if (!row.surface.batch) surface_ms.push_back(MsPerKeyframe(row.surface));
-    queue_ms.push_back(row.queue_ms);
-  }
   // The rays short of the uncertain points (SculptorOptions::uncertain_ray_margin_deg) in the
   // last sculpting, the surface written (the last replay's rows, or the stream's).
   size_t uncertain_rays = 0;
   for (const PipelineKeyframeRow& row : result.surface_rows) {
+    if (!row.surface.batch) surface_ms.push_back(MsPerKeyframe(row.surface));
+    queue_ms.push_back(row.queue_ms);
     if (row.replay == result.surface_rows.back().replay)
       uncertain_rays += row.surface.rays_uncertain;
   }

@@ -82,10 +82,7 @@ SculptorOptions ReplaySculptorOptions(const SculptorOptions& base, LoopReplay mo
 double ReplayScale(double scale, double reference_spacing,
                    const std::vector<SurfaceKeyframe>& keyframes, size_t count, double max_change,
                    double* new_spacing) {
-  const size_t n = std::min(count, keyframes.size());
-  double sum = 0.0;
-  for (size_t i = 1; i < n; ++i) sum += (keyframes[i].centre - keyframes[i - 1].centre).norm();
-  const double spacing = n > 1 ? sum / static_cast<double>(n - 1) : 0.0;
+  const double spacing = MeanKeyframeSpacing(keyframes, count);
   if (new_spacing) *new_spacing = spacing;
   if (!(scale > 0.0) || !(reference_spacing > 0.0) || !(spacing > 0.0)) return scale;
   const double ratio = spacing / reference_spacing;

@@ -77,6 +77,13 @@ std::string SculptorOptions::Check() const {
   return "";
 }
 
+double MeanKeyframeSpacing(const std::vector<SurfaceKeyframe>& keyframes, size_t count) {
+  const size_t n = std::min(count, keyframes.size());
+  double sum = 0.0;
+  for (size_t i = 1; i < n; ++i) sum += (keyframes[i].centre - keyframes[i - 1].centre).norm();
+  return n > 1 ? sum / static_cast<double>(n - 1) : 0.0;
+}
+
 double MsPerKeyframe(const KeyframeStats& stats) {
   return stats.ms_total / static_cast<double>(std::max<size_t>(1, stats.keyframes));
 }
@@ -352,10 +359,7 @@ struct IncrementalSculptor::Impl {
   void SetScale(const std::vector<SurfaceKeyframe>& first) {
     s = options.scale;
     if (s == 0.0) {
-      double sum = 0.0;
-      for (size_t i = 1; i < first.size(); ++i)
-        sum += (first[i].centre - first[i - 1].centre).norm();
-      spacing = first.size() > 1 ? sum / static_cast<double>(first.size() - 1) : 0.0;
+      spacing = MeanKeyframeSpacing(first, first.size());
       s = spacing;
       const double reach = MeasuredReach(first);
       if (spacing > 0.0 && reach > options.max_ray_length_factor * spacing) {
@@ -388,23 +392,29 @@ struct IncrementalSculptor::Impl {
     grid_origin = first.front().centre + step * Eigen::Vector3d(0.3183, 0.2718, 0.1414);
   }
 
-  // The widest angle between two rays of p (radians; 0 with fewer than two rays).
-  static double MaxApertureRad(const SurfacePoint& p) {
+  // The smallest cosine of the angle between two rays of p (1 with fewer than two rays), or the
+  // first one below stop_below: whether p passes the aperture filter, and when it does not, its
+  // aperture (the walk over every pair done once).
+  static double MinRayCosine(const SurfacePoint& p, double stop_below) {
     double min_cos = 1.0;
     for (size_t i = 0; i < p.rays.size(); ++i) {
       const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
       for (size_t j = i + 1; j < p.rays.size(); ++j) {
-        min_cos = std::min(min_cos, a.dot((p.rays[j].origin - p.position).normalized()));
+        const Eigen::Vector3d b = (p.rays[j].origin - p.position).normalized();
+        min_cos = std::min(min_cos, a.dot(b));
+        if (min_cos < stop_below) return min_cos;
       }
     }
-    return std::acos(std::clamp(min_cos, -1.0, 1.0));
+    return min_cos;
   }
+  double MinApertureCosine() const { return std::cos(options.min_aperture_deg * M_PI / 180.0); }
 
   // SculptorOptions::uncertain_ray_margin_deg: the shortened rays of p (dropped by the aperture
-  // filter), appended to *segments as (origin, end).
-  void AddUncertainRays(const SurfacePoint& p, std::vector<Segment>* segments) const {
+  // filter, its rays' smallest cosine min_cos), appended to *segments as (origin, end).
+  void AddUncertainRays(const SurfacePoint& p, double min_cos,
+                        std::vector<Segment>* segments) const {
     if (options.uncertain_ray_margin_deg <= 0.0 || segments == nullptr) return;
-    const double aperture = MaxApertureRad(p);
+    const double aperture = std::acos(std::clamp(min_cos, -1.0, 1.0));
     if (!(aperture > 0.0)) return;
     const double fraction = 1.0 - options.uncertain_ray_margin_deg * M_PI / 180.0 / aperture;
     if (!(fraction >= options.uncertain_ray_min_fraction)) return;
@@ -416,15 +426,8 @@ struct IncrementalSculptor::Impl {
 
   // Two rays of p more than min_aperture_deg apart (the aperture filter of §5.1).
   bool WideAperture(const SurfacePoint& p) const {
-    const double cos_min = std::cos(options.min_aperture_deg * M_PI / 180.0);
-    for (size_t i = 0; i < p.rays.size(); ++i) {
-      const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
-      for (size_t j = i + 1; j < p.rays.size(); ++j) {
-        const Eigen::Vector3d b = (p.rays[j].origin - p.position).normalized();
-        if (a.dot(b) < cos_min) return true;
-      }
-    }
-    return false;
+    const double cos_min = MinApertureCosine();
+    return MinRayCosine(p, cos_min) < cos_min;
   }
 
   // SculptorOptions::reach_quantile: the distance of the first keyframes' points with a wide
@@ -473,6 +476,8 @@ struct IncrementalSculptor::Impl {
                                           std::vector<Segment>* uncertain = nullptr) const {
     std::vector<const SurfacePoint*> kept;
     const Eigen::Vector3d up = options.up.normalized();
+    const double cos_min = MinApertureCosine();
+    double min_cos = 1.0;  // of the point the aperture filter looked at last
     // Each point is counted by the first filter that removes it.
     auto removed_by = [&](const SurfacePoint& p) -> size_t* {
       if (!p.position.allFinite() || p.rays.empty()) return &st.points_invalid;
@@ -480,13 +485,14 @@ struct IncrementalSculptor::Impl {
       const Eigen::Vector3d d = p.position - kf.centre;
       if (d.dot(up) < -ground) return &st.points_filtered_ground;
       if (d.norm() > r) return &st.points_filtered_length;
-      return WideAperture(p) ? nullptr : &st.points_filtered_aperture;
+      min_cos = MinRayCosine(p, cos_min);
+      return min_cos < cos_min ? nullptr : &st.points_filtered_aperture;
     };
     for (const SurfacePoint& p : kf.points) {
       if (size_t* count = removed_by(p)) {
         ++*count;
         ++st.points_filtered;
-        if (count == &st.points_filtered_aperture) AddUncertainRays(p, uncertain);
+        if (count == &st.points_filtered_aperture) AddUncertainRays(p, min_cos, uncertain);
       } else {
         kept.push_back(&p);
       }

@@ -333,6 +333,10 @@ void ColorMeshVertices(const std::vector<PointId>& vertex_points,
                        const std::unordered_map<PointId, Rgb8>& point_colors, TriangleMesh* mesh,
                        uint8_t grey = 128);
 
+// The mean distance between consecutive centres of the first `count` keyframes (0 with fewer
+// than two): the keyframe spacing that s is measured from (SculptorOptions::scale).
+double MeanKeyframeSpacing(const std::vector<SurfaceKeyframe>& keyframes, size_t count);
+
 // The surface time per keyframe of a step: its ms_total over its keyframes (amortised when
 // SculptorOptions::keyframes_per_step sculpts several at once).
 double MsPerKeyframe(const KeyframeStats& stats);

@@ -79,6 +79,8 @@ std::string SfmRunnerOptions::Check() const {
     return "final_bundle_adjustment_merge_angle: expected 0 (none) or an angle below 0.1 rad";
   if (const std::string check = final_frame_refinement_checks.Check(); !check.empty())
     return "final_frame_refinement_checks." + check;
+  if (!(min_metric_offset_depth_ratio >= 0.0))
+    return "min_metric_offset_depth_ratio: expected a ratio of 0 or more";
   return {};
 }
 
@@ -496,6 +498,18 @@ SfmRunResult SfmRunner::Finish() {
   result.metric_scale = s.tracker.MetricScale();
   result.largest_camera_offset = s.rig.MaxCenterOffset();
   result.median_point_depth = s.tracker.MedianPointDepth();
+  if (result.median_point_depth > 0.0)
+    result.offset_depth_ratio = result.largest_camera_offset / result.median_point_depth;
+  if (result.metric_scale &&
+      !(result.offset_depth_ratio >= s.options.min_metric_offset_depth_ratio)) {
+    result.metric_scale = false;
+    result.scale_source = fmt::format(
+        "arbitrary, near metres (the rig's camera offsets are {:.2g} % of the points' median "
+        "depth, below the {:.2g} % that makes them fix the scale to a few per cent; the scale came "
+        "from: {})",
+        100.0 * result.offset_depth_ratio, 100.0 * s.options.min_metric_offset_depth_ratio,
+        result.scale_source);
+  }
   if (!result.scale_source.empty())
     spdlog::info("sfm: scale {}; largest camera offset {:.3f} m, median point depth {:.2f}",
                  result.scale_source, result.largest_camera_offset, result.median_point_depth);

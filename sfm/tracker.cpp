@@ -439,7 +439,8 @@ struct Tracker::Impl {
   Resection EvaluatePose(const std::vector<TrackObservation>& observations,
                          const Rigid3d& world_from_rig) const;
   void TriangulateNewPoints(int keyframe);
-  void LocalBundleAdjustment();
+  // hold_scale: the first two keyframes fixed whatever the mode (the map's scale held).
+  void LocalBundleAdjustment(bool hold_scale = false);
   void FinalizeUpTo(int end);
   // The "keyframe finalised" event of keyframe k: its pose and the points handed over with it
   // (their rays from keyframes up to k).
@@ -546,7 +547,11 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
   }
   // After the last use of keyframe0: the push_back may reallocate keyframes.
   keyframes.push_back(std::move(keyframe1));
-  LocalBundleAdjustment();
+  // The scale held: two keyframes barely observe it through the offsets (4 cm offsets, a step
+  // of 0.75 m and points 10 m away: the adjustment took the unit step to anything from 0.23 to
+  // 3,700), and from such a start the later adjustments did not always come back. The
+  // adjustments of three keyframes and more, with more points and rotation, set it.
+  LocalBundleAdjustment(/*hold_scale=*/true);
   result.tracked = true;
   result.keyframe = true;
   result.world_from_rig = keyframes.back().world_from_rig;
@@ -1108,9 +1113,9 @@ std::vector<WorldRay> Tracker::Impl::FramePointRays(const FramePoint& point) con
   return rays;
 }
 
-void Tracker::Impl::LocalBundleAdjustment() {
+void Tracker::Impl::LocalBundleAdjustment(bool hold_scale) {
   const int num_keyframes = static_cast<int>(keyframes.size());
-  const int gauge_keyframes = GaugeKeyframes();
+  const int gauge_keyframes = hold_scale ? 2 : GaugeKeyframes();
   const int free_begin = std::max(gauge_keyframes, num_keyframes - options.num_free_keyframes);
   const int fixed_begin = std::max(0, free_begin - options.num_fixed_keyframes);
   BundleAdjustmentProblem problem;

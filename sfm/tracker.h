@@ -76,9 +76,11 @@ struct TrackerOptions {
   bool stereo_map_fallback = true;
   // Non-central mode: the adjustments hold only the first keyframe fixed, so that the rig's
   // camera offsets give the map its scale in metres (the first step of a two-frame
-  // initialisation is then only a starting value). How well the offsets observe the scale
-  // depends on their size against the depth of the points (Tracker::MedianPointDepth). false:
-  // the first two keyframes are fixed, and the scale is that of the initialisation.
+  // initialisation is then only a starting value, which the adjustment of the first two
+  // keyframes alone keeps: two keyframes barely observe the scale). How well the offsets
+  // observe the scale depends on their size against the depth of the points
+  // (Tracker::MedianPointDepth). false: the first two keyframes are fixed, and the scale is
+  // that of the initialisation.
   bool scale_from_offsets = true;
   int min_stereo_scale_points = 8;
   int min_resection_inliers = 30;  // fewer: the frame is reported as not tracked

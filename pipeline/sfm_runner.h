@@ -95,8 +95,8 @@ struct SfmRunnerOptions {
   // Non-central mode: a map whose scale comes from the rig (its camera offsets, a stereo pair)
   // is called metric only when the largest camera offset is at least this share of the points'
   // median depth. Below it the offsets fix the scale only to a few per cent: the ladybug-like rig
-  // (5 cm for points about 10 m away, 0.5 %) ended 0.91 to 1.05 times metric over 24 runs of 60
-  // frames and 0.90 to 1.04 times over 12 whole drives with a loop; the car rig (1.3 m for
+  // (5 cm for points about 10 m away, 0.5 %) ended 0.91 to 1.07 times metric over 24 runs of 60
+  // frames and 0.96 to 1.06 times over 12 whole drives with a loop; the car rig (1.3 m for
   // points 20 m away, 6.6 %) within 0.2 % (docs/figures.md F68). The map is then reported as of
   // arbitrary scale, near metres.
   double min_metric_offset_depth_ratio = 0.01;

@@ -71,6 +71,8 @@ std::string TrackerOptions::Check() const {
         {"bundle_adjustment", bundle_adjustment.Check()}})
     if (!check.empty()) return std::string(name) + "." + check;
   if (num_free_keyframes < 1) return "num_free_keyframes: expected at least 1";
+  if (!(max_initial_scale_growth > 1.0))
+    return "max_initial_scale_growth: expected a factor above 1";
   if (num_fixed_keyframes < 1) return "num_fixed_keyframes: expected at least 1";
   if (global_bundle_adjustment_threads < 1)
     return "global_bundle_adjustment_threads: expected at least 1";
@@ -439,8 +441,10 @@ struct Tracker::Impl {
   Resection EvaluatePose(const std::vector<TrackObservation>& observations,
                          const Rigid3d& world_from_rig) const;
   void TriangulateNewPoints(int keyframe);
-  // hold_scale: the first two keyframes fixed whatever the mode (the map's scale held).
-  void LocalBundleAdjustment(bool hold_scale = false);
+  // max_scale_growth > 0 (the initialisation's adjustment of the first two keyframes, in
+  // non-central mode): when the adjustment makes the distance between them more than this many
+  // times larger, it is solved again with both fixed (the scale held).
+  void LocalBundleAdjustment(double max_scale_growth = 0.0);
   void FinalizeUpTo(int end);
   // The "keyframe finalised" event of keyframe k: its pose and the points handed over with it
   // (their rays from keyframes up to k).
@@ -547,11 +551,14 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
   }
   // After the last use of keyframe0: the push_back may reallocate keyframes.
   keyframes.push_back(std::move(keyframe1));
-  // The scale held: two keyframes barely observe it through the offsets (4 cm offsets, a step
-  // of 0.75 m and points 10 m away: the adjustment took the unit step to anything from 0.23 to
-  // 3,700), and from such a start the later adjustments did not always come back. The
-  // adjustments of three keyframes and more, with more points and rotation, set it.
-  LocalBundleAdjustment(/*hold_scale=*/true);
+  // Two keyframes barely observe the scale through small offsets (4 cm offsets, a step of
+  // 0.75 m and points 10 m away: their adjustment took the unit step to anything from 0.008 to
+  // 3,700). A map too small comes back (its offsets, large against its depths, observe the
+  // scale well); from a map thousands of times metric the later adjustments did not (its
+  // offsets are lost against its depths): a growth beyond max_initial_scale_growth is not taken
+  // (LocalBundleAdjustment).
+  LocalBundleAdjustment(
+      !options.central && options.scale_from_offsets ? options.max_initial_scale_growth : 0.0);
   result.tracked = true;
   result.keyframe = true;
   result.world_from_rig = keyframes.back().world_from_rig;
@@ -1113,9 +1120,9 @@ std::vector<WorldRay> Tracker::Impl::FramePointRays(const FramePoint& point) con
   return rays;
 }
 
-void Tracker::Impl::LocalBundleAdjustment(bool hold_scale) {
+void Tracker::Impl::LocalBundleAdjustment(double max_scale_growth) {
   const int num_keyframes = static_cast<int>(keyframes.size());
-  const int gauge_keyframes = hold_scale ? 2 : GaugeKeyframes();
+  const int gauge_keyframes = GaugeKeyframes();
   const int free_begin = std::max(gauge_keyframes, num_keyframes - options.num_free_keyframes);
   const int fixed_begin = std::max(0, free_begin - options.num_fixed_keyframes);
   BundleAdjustmentProblem problem;
@@ -1152,7 +1159,27 @@ void Tracker::Impl::LocalBundleAdjustment(bool hold_scale) {
   ba_options.mode = options.central ? BundleAdjustmentOptions::Mode::kCentral
                                     : BundleAdjustmentOptions::Mode::kNonCentral;
   const auto start = std::chrono::steady_clock::now();
-  const BundleAdjustmentSummary summary = LocalBundleAdjust(rig, ba_options, &problem);
+  const bool check_scale = max_scale_growth > 0.0 && fixed_begin == 0 &&
+                           problem.keyframes.size() >= 2 && !problem.keyframes[1].fixed;
+  BundleAdjustmentProblem unsolved;
+  if (check_scale) unsolved = problem;
+  BundleAdjustmentSummary summary = LocalBundleAdjust(rig, ba_options, &problem);
+  if (check_scale && summary.success) {
+    const auto step = [](const BundleAdjustmentProblem& p) {
+      return (p.keyframes[1].world_from_rig.translation - p.keyframes[0].world_from_rig.translation)
+          .norm();
+    };
+    const double growth = step(problem) / step(unsolved);
+    if (!(growth <= max_scale_growth)) {
+      spdlog::debug(
+          "sfm: the adjustment of the first keyframes made their distance {} times "
+          "larger; solved again with the scale held",
+          growth);
+      problem = std::move(unsolved);
+      problem.keyframes[1].fixed = true;
+      summary = LocalBundleAdjust(rig, ba_options, &problem);
+    }
+  }
   AddSeconds(start, &timings.bundle_adjustment);
   if (!summary.success) return;
   for (size_t k = 0; k < problem.keyframes.size(); ++k)

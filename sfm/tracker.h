@@ -76,12 +76,17 @@ struct TrackerOptions {
   bool stereo_map_fallback = true;
   // Non-central mode: the adjustments hold only the first keyframe fixed, so that the rig's
   // camera offsets give the map its scale in metres (the first step of a two-frame
-  // initialisation is then only a starting value, which the adjustment of the first two
-  // keyframes alone keeps: two keyframes barely observe the scale). How well the offsets
-  // observe the scale depends on their size against the depth of the points
-  // (Tracker::MedianPointDepth). false: the first two keyframes are fixed, and the scale is
-  // that of the initialisation.
+  // initialisation is then only a starting value). How well the offsets observe the scale
+  // depends on their size against the depth of the points (Tracker::MedianPointDepth). false:
+  // the first two keyframes are fixed, and the scale is that of the initialisation.
   bool scale_from_offsets = true;
+  // With scale_from_offsets: when the adjustment of the first two keyframes makes their
+  // distance more than this many times larger than the initialisation's unit step (a keyframe
+  // step beyond 100 m: the offsets, lost against the depths, did not observe the scale), it is
+  // solved again with both keyframes fixed, the scale held for the adjustments of three
+  // keyframes and more to set. A map made too small is left to them: its offsets, large
+  // against its depths, observe the scale well, and it came back on every run measured.
+  double max_initial_scale_growth = 100.0;
   int min_stereo_scale_points = 8;
   int min_resection_inliers = 30;  // fewer: the frame is reported as not tracked
   // ... unless at least min_consistent_inliers of them are at least consistent_inlier_share of

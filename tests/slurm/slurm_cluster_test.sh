@@ -6,9 +6,8 @@
 # by `omnisculpt eval`:
 #   * every segment and the merge succeeded, and merge.json names no missing segment and merged
 #     every input (each joined to the others by a verified overlap);
-#   * the city's keyframe ATE (eval.json poses.ate_translation_m.rmse) is at most twice the
-#     single run's (measured 1.9 cm against 1.2 cm; a segment that fails to join, or joins at
-#     the wrong place, costs decimetres);
+#   * the city's keyframe ATE (eval.json poses.ate_translation_m.rmse) is at most 1.5 times the
+#     single run's;
 #   * the city's surface.ply is an oriented 2-manifold with boundary (mesh-check
 #     --allow-boundary, and boundary loops);
 #   * its pixel F-score at 0.5 m (eval.json pixel.precision_recall) is within 0.05 of the
@@ -247,8 +246,8 @@ for key in s:
     print("    %-40s %14s %14s %16s" % (key, show(c[key] if c else None), show(s[key]), show(n[key])))
 
 if c is not None:
-    if not c["ATE RMS (m)"] <= 2.0 * s["ATE RMS (m)"]:
-        problems.append("the city's ATE RMS %.4f m is above 2 x the single run's %.4f m"
+    if not c["ATE RMS (m)"] <= 1.5 * s["ATE RMS (m)"]:
+        problems.append("the city's ATE RMS %.4f m is above 1.5 x the single run's %.4f m"
                         % (c["ATE RMS (m)"], s["ATE RMS (m)"]))
     if not abs(c["pixel F at 0.5 m"] - s["pixel F at 0.5 m"]) <= 0.05:
         problems.append("the city's pixel F at 0.5 m %.3f is not within 0.05 of the single run's %.3f"

@@ -85,7 +85,7 @@ struct TrackerOptions {
   // step beyond 100 m: the offsets, lost against the depths, did not observe the scale), it is
   // solved again with both keyframes fixed, the scale held for the adjustments of three
   // keyframes and more to set. A map made too small is left to them: its offsets, large
-  // against its depths, observe the scale well, and it came back on every run measured.
+  // against its depths, observe the scale well (docs/figures.md F68).
   double max_initial_scale_growth = 100.0;
   int min_stereo_scale_points = 8;
   int min_resection_inliers = 30;  // fewer: the frame is reported as not tracked

@@ -191,7 +191,9 @@ struct SfmRunResult {
   // The keyframe rule's share (KeyframeSelectionOptions::min_tracked_share).
   double min_tracked_share = 0.0;
   double continuation_pool = 1.0;
-  // Where the map's scale comes from (Tracker::ScaleSource), and whether it is in metres.
+  // Where the map's scale comes from (Tracker::ScaleSource), and whether it is in metres
+  // (Tracker::MetricScale); both say "arbitrary, near metres" instead when the offsets are small
+  // against the depth (SfmRunnerOptions::min_metric_offset_depth_ratio).
   std::string scale_source;
   bool metric_scale = false;
   // What the offsets weigh against: the largest camera offset (m) and the points' median depth.

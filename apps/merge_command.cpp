@@ -7,6 +7,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -36,6 +37,13 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+
+// The frame points of a model's frame_rays.txt (tracks between keyframes, for the surface).
+size_t FramePoints(const ColmapModel& model) {
+  return static_cast<size_t>(
+      std::count_if(model.frame_rays.begin(), model.frame_rays.end(),
+                    [](const ColmapFrameRayPoint& line) { return line.point3d_id == 0; }));
+}
 
 SculptorOptions MergeSculptor() {
   SculptorOptions sculptor;
@@ -192,6 +200,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
                             {"keyframes", segments[s].keyframe_poses.size()},
                             {"frames_tracked", segments[s].frame_poses.size()},
                             {"points", segments[s].model.points.size()},
+                            {"frame_points", FramePoints(segments[s].model)},
                             {"merged", bool(merged.merged[s])}};
     if (merged.merged[s]) {
       input["city_from_segment"] = Sim3Json(merged.city_from_segment[s]);
@@ -263,6 +272,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
       {"points_in", merged.input_points},
       {"points", cloud.points.size()},
       {"points_fused", merged.fused_points},
+      {"frame_points", FramePoints(merged.model)},
       {"keyframes", stream.size()},
       {"final_batch", {{"ran", batch.sculptor != nullptr}, {"seconds", batch.seconds}}},
       {"uncertain_rays", uncertain_rays},

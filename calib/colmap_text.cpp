@@ -182,6 +182,34 @@ ColmapModel ParseColmapModel(const ColmapTextModel& text, const std::filesystem:
     }
     result.points.push_back(std::move(point));
   }
+
+  // Frame rays: POINT3D_ID X Y Z R G B NUM_RAYS RAYS[] as (IMAGE_NAME CX CY CZ).
+  const std::filesystem::path frame_rays_path = model / "frame_rays.txt";
+  for (const DataLine& line : DataLines(text.frame_rays, false)) {
+    const LineReader in(frame_rays_path, line);
+    if (line.tokens.size() < 12 || (line.tokens.size() - 8) % 4 != 0) {
+      in.Fail("expected POINT3D_ID X Y Z R G B NUM_RAYS RAYS[] (IMAGE_NAME CX CY CZ), got " +
+              std::to_string(line.tokens.size()) + " fields");
+    }
+    ColmapFrameRayPoint point;
+    point.point3d_id = in.Id(0, "POINT3D_ID");
+    if (point.point3d_id != 0 && point_ids.count(point.point3d_id) == 0)
+      in.Fail("POINT3D_ID " + in.Token(0) + " is not in " + points_path.filename().string());
+    point.xyz = Eigen::Vector3d(in.Number(1, "X"), in.Number(2, "Y"), in.Number(3, "Z"));
+    point.color = Rgb8(static_cast<uint8_t>(in.Integer(4, "R", 0, 255)),
+                       static_cast<uint8_t>(in.Integer(5, "G", 0, 255)),
+                       static_cast<uint8_t>(in.Integer(6, "B", 0, 255)));
+    const size_t num_rays = static_cast<size_t>(in.Integer(7, "NUM_RAYS", 1, kMaxColmapId));
+    if (line.tokens.size() != 8 + 4 * num_rays)
+      in.Fail("NUM_RAYS is " + in.Token(7) + " but the line holds " +
+              std::to_string((line.tokens.size() - 8) / 4) + " rays");
+    for (size_t k = 8; k < line.tokens.size(); k += 4) {
+      point.rays.push_back(
+          {in.Token(k), Eigen::Vector3d(in.Number(k + 1, "CX"), in.Number(k + 2, "CY"),
+                                        in.Number(k + 3, "CZ"))});
+    }
+    result.frame_rays.push_back(std::move(point));
+  }
   return result;
 }
 
@@ -193,6 +221,8 @@ ColmapTextModel ReadColmapText(const std::filesystem::path& folder) {
   text.cameras = ReadInputFile(folder / "cameras.txt");
   text.images = ReadInputFile(folder / "images.txt");
   text.points3d = ReadInputFile(folder / "points3D.txt");
+  if (std::filesystem::exists(folder / "frame_rays.txt"))
+    text.frame_rays = ReadInputFile(folder / "frame_rays.txt");
   return text;
 }
 
@@ -247,7 +277,28 @@ ColmapTextModel FormatColmapModel(const ColmapModel& model) {
     points << '\n';
   }
   text.points3d = points.str();
+  if (!model.frame_rays.empty()) text.frame_rays = FormatColmapFrameRays(model.frame_rays);
   return text;
+}
+
+std::string FormatColmapFrameRays(const std::vector<ColmapFrameRayPoint>& points) {
+  std::ostringstream text;
+  text << std::setprecision(10);
+  text << "# Rays of the tracked frames between keyframes, one line per point with such rays:\n"
+       << "#   POINT3D_ID, X, Y, Z, R, G, B, NUM_RAYS, RAYS[] as (IMAGE_NAME, CX, CY, CZ)\n"
+       << "# POINT3D_ID 0: a frame point, not in points3D.txt. CX CY CZ: the ray's optical "
+          "centre.\n"
+       << "# Number of points: " << points.size() << "\n";
+  for (const ColmapFrameRayPoint& point : points) {
+    text << point.point3d_id << ' ' << point.xyz.x() << ' ' << point.xyz.y() << ' ' << point.xyz.z()
+         << ' ' << int{point.color[0]} << ' ' << int{point.color[1]} << ' ' << int{point.color[2]}
+         << ' ' << point.rays.size();
+    for (const ColmapFrameRay& ray : point.rays)
+      text << ' ' << ray.image_name << ' ' << ray.centre.x() << ' ' << ray.centre.y() << ' '
+           << ray.centre.z();
+    text << '\n';
+  }
+  return text.str();
 }
 
 void WriteColmapModel(const ColmapModel& model, const std::filesystem::path& folder) {
@@ -256,6 +307,11 @@ void WriteColmapModel(const ColmapModel& model, const std::filesystem::path& fol
   WriteTextFileAtomically(folder / "cameras.txt", text.cameras);
   WriteTextFileAtomically(folder / "images.txt", text.images);
   WriteTextFileAtomically(folder / "points3D.txt", text.points3d);
+  // A frame_rays.txt of an earlier model would not match these points.
+  if (!text.frame_rays.empty())
+    WriteTextFileAtomically(folder / "frame_rays.txt", text.frame_rays);
+  else
+    std::filesystem::remove(folder / "frame_rays.txt");
 }
 
 }  // namespace omni

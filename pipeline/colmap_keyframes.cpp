@@ -2,6 +2,8 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cstdint>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -56,6 +58,50 @@ std::map<std::string, std::vector<size_t>> FramesOf(const ColmapModel& colmap) {
   for (size_t i = 0; i < colmap.images.size(); ++i)
     frames[FrameKey(colmap.images[i].name)].push_back(i);
   return frames;
+}
+
+// The rays of frame_rays.txt (calib/colmap_text.h): a point of the model gets its rays of the
+// frames between keyframes; a frame point goes to the latest keyframe at or before the last
+// frame that saw it (the first keyframe when none is), as the SfM hands it over, with an id
+// after the model's.
+void AddFrameRays(const ColmapModel& colmap,
+                  const std::map<std::string, std::vector<uint32_t>>& frames,
+                  std::unordered_map<PointId, Rgb8>* point_colors,
+                  std::vector<SurfaceKeyframe>* keyframes) {
+  if (colmap.frame_rays.empty() || keyframes->empty()) return;
+  std::unordered_map<uint32_t, std::pair<size_t, size_t>> where;  // point id -> keyframe, index
+  uint64_t next_id = 1;
+  for (size_t k = 0; k < keyframes->size(); ++k)
+    for (size_t i = 0; i < (*keyframes)[k].points.size(); ++i)
+      where[(*keyframes)[k].points[i].id.value] = {k, i};
+  for (const ColmapPoint3D& point : colmap.points)
+    next_id = std::max(next_id, uint64_t{point.id} + 1);
+  std::vector<std::string> keys;  // the keyframes' frame keys, in keyframe order
+  for (const auto& entry : frames) keys.push_back(entry.first);
+  for (const ColmapFrameRayPoint& line : colmap.frame_rays) {
+    if (line.point3d_id != 0) {
+      const auto it = where.find(line.point3d_id);
+      if (it == where.end()) continue;  // a point without a ray from the model's images
+      SurfaceKeyframe& keyframe = (*keyframes)[it->second.first];
+      SurfacePoint& point = keyframe.points[it->second.second];
+      for (const ColmapFrameRay& ray : line.rays) point.rays.push_back({keyframe.id, ray.centre});
+      continue;
+    }
+    std::string last;
+    for (const ColmapFrameRay& ray : line.rays) last = std::max(last, FrameKey(ray.image_name));
+    const auto after = std::upper_bound(keys.begin(), keys.end(), last);
+    SurfaceKeyframe& keyframe =
+        (*keyframes)[after == keys.begin() ? 0 : static_cast<size_t>(after - keys.begin()) - 1];
+    if (next_id > std::numeric_limits<uint32_t>::max())
+      throw InputError("frame_rays.txt", "",
+                       "no point id is left for the frame points (points3D.txt uses the last)");
+    SurfacePoint point;
+    point.id = PointId(static_cast<uint32_t>(next_id++));
+    point.position = line.xyz;
+    for (const ColmapFrameRay& ray : line.rays) point.rays.push_back({keyframe.id, ray.centre});
+    if (point_colors) (*point_colors)[point.id] = line.color;
+    keyframe.points.push_back(std::move(point));
+  }
 }
 
 }  // namespace
@@ -124,6 +170,7 @@ std::vector<SurfaceKeyframe> ColmapKeyframes(const ColmapModel& colmap,
     if (point.rays.empty()) continue;  // no observation: no ray
     keyframes[latest].points.push_back(std::move(point));
   }
+  AddFrameRays(colmap, frames, point_colors, &keyframes);
   return keyframes;
 }
 

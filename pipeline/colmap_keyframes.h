@@ -8,7 +8,9 @@
 // Keyframes are ordered by frame key: the name without its camera folder ("000123.png",
 // "d1/images/000123.png") or camera suffix ("f000123.png"). A point goes to
 // the latest keyframe of its track (paper §3.3: observed by keyframes t' ≤ t) with one ray per
-// observing image, starting at that camera's centre.
+// observing image, starting at that camera's centre. A model with frame_rays.txt (our own:
+// calib/colmap_text.h) adds to a point the rays of the frames between keyframes that saw it, and
+// its frame points, each to the latest keyframe at or before the last frame that saw it.
 
 #include <filesystem>
 #include <string>

@@ -4,12 +4,15 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <numeric>
+#include <optional>
 #include <unordered_map>
 
 #include "calib/drive.h"
@@ -551,6 +554,81 @@ void AdjustMergedMap(const Rig& rig,
   }
 }
 
+// The segments' frame rays (sparse/frame_rays.txt) in the merged model. Each frame's rays come
+// from the segment that poses the frame in the merge (the one in which it is most central), so
+// that two segments' rays of a shared frame are not both kept; a frame point is kept by the
+// segment that poses the last frame that saw it, with all its rays. A ray's centre keeps its place
+// in the rig of its frame: from the segment's pose of the frame to the frame's merged pose (the
+// similarity, then the adjustment's correction); a frame point moves so with its last frame.
+void MergeFrameRays(const std::vector<MergeSegment>& segments,
+                    const std::function<std::string(int, const std::string&)>& merged_name,
+                    const std::function<uint32_t(int, uint32_t)>& merged_point_id,
+                    MergeResult* result) {
+  const int count = static_cast<int>(segments.size());
+  for (const MergedDrive& drive : result->drives) {
+    // Frame -> (centrality, owning segment), as the drive's poses were chosen.
+    std::map<size_t, std::pair<long, int>> owner;
+    for (int s = 0; s < count; ++s) {
+      if (!result->merged[s] || segments[s].drive != drive.folder) continue;
+      for (const auto& entry : segments[s].frame_poses) {
+        const long centrality = Centrality(segments[s], entry.first);
+        const auto it = owner.find(entry.first);
+        if (it == owner.end() || it->second.first < centrality)
+          owner[entry.first] = {centrality, s};
+      }
+    }
+    std::map<size_t, Rigid3d> merged_pose;
+    for (size_t f = 0; f < drive.frames.size(); ++f)
+      merged_pose[drive.frame_frames[f]] = drive.frames[f].world_from_rig;
+    for (int s = 0; s < count; ++s) {
+      const MergeSegment& segment = segments[s];
+      if (!result->merged[s] || segment.drive != drive.folder) continue;
+      const double scale = result->city_from_segment[s].scale;
+      // A point of the segment's world, seen from frame `frame`, in the city; nothing when the
+      // frame is not posed by both.
+      const auto to_city = [&](size_t frame,
+                               const Eigen::Vector3d& point) -> std::optional<Eigen::Vector3d> {
+        const auto pose = segment.frame_poses.find(frame);
+        const auto merged = merged_pose.find(frame);
+        if (pose == segment.frame_poses.end() || merged == merged_pose.end()) return std::nullopt;
+        return merged->second * (scale * (pose->second.world_from_rig.Inverse() * point));
+      };
+      const auto owned = [&](size_t frame) {
+        const auto it = owner.find(frame);
+        return it != owner.end() && it->second.second == s;
+      };
+      for (const ColmapFrameRayPoint& line : segment.model.frame_rays) {
+        ColmapFrameRayPoint merged;
+        merged.color = line.color;
+        if (line.point3d_id != 0) {
+          merged.point3d_id = merged_point_id(s, line.point3d_id);
+          if (merged.point3d_id == 0) continue;
+          const ColmapPoint3D& point = result->model.points.at(merged.point3d_id - 1);
+          assert(point.id == merged.point3d_id);
+          merged.xyz = point.xyz;
+        } else {
+          std::optional<size_t> last;
+          for (const ColmapFrameRay& ray : line.rays) {
+            const std::optional<size_t> frame = FrameOfImage(segment, ray.image_name);
+            if (frame && (!last || *frame > *last)) last = frame;
+          }
+          if (!last || !owned(*last)) continue;
+          const std::optional<Eigen::Vector3d> xyz = to_city(*last, line.xyz);
+          if (!xyz) continue;
+          merged.xyz = *xyz;
+        }
+        for (const ColmapFrameRay& ray : line.rays) {
+          const std::optional<size_t> frame = FrameOfImage(segment, ray.image_name);
+          if (!frame || (line.point3d_id != 0 && !owned(*frame))) continue;
+          const std::optional<Eigen::Vector3d> centre = to_city(*frame, ray.centre);
+          if (centre) merged.rays.push_back({merged_name(s, ray.image_name), *centre});
+        }
+        if (!merged.rays.empty()) result->model.frame_rays.push_back(std::move(merged));
+      }
+    }
+  }
+}
+
 }  // namespace
 
 BundleAdjustmentOptions MergeOptions::DefaultGlobalAdjustment() {
@@ -1006,6 +1084,14 @@ MergeResult MergeSegments(const std::vector<MergeSegment>& segments, const Merge
     result.adjustment_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
+  MergeFrameRays(
+      segments, [&](int s, const std::string& name) { return merged_name(segments[s], name); },
+      [&](int s, uint32_t id) -> uint32_t {
+        const auto node = nodes_of[s].find(id);
+        if (node == nodes_of[s].end()) return 0;
+        return result.model.points[merged_point_of.at(classes.Find(node->second))].id;
+      },
+      &result);
   return result;
 }
 

@@ -9,7 +9,9 @@
 // (sfm/pose_graph.h), solved with the largest segment fixed. The merged model keeps, for every
 // image, the pose of the segment in which its frame is farthest from the segment's ends (the
 // best constrained), the 2-D points of every segment, and one 3-D point per set of segment
-// points that share a corner (the same pixel of the same image): duplicates are fused.
+// points that share a corner (the same pixel of the same image): duplicates are fused. The
+// segments' rays of the frames between keyframes (sparse/frame_rays.txt) follow: each frame's from
+// the segment that poses it, each frame point from the segment that poses its last frame.
 
 #include <cstddef>
 #include <filesystem>
@@ -44,7 +46,7 @@ struct MergeRevisitOptions {
   // Revisits kept per pair of segments, most inliers first, each of another place (their
   // frames in the querying segment min_frame_gap apart).
   int max_revisits_per_pair = 3;
-  double min_inlier_ratio = 0.5;    // similarity inliers over the 3-D matches
+  double min_inlier_ratio = 0.5;  // similarity inliers over the 3-D matches
   // When the shared frames already align the two segments: the revisit's similarity must move
   // the revisiting keyframe by at most this share of the merged drive's length and turn it by
   // at most max_rotation_deg (drift, not a look-alike place).
@@ -131,7 +133,7 @@ struct MergeResult {
   std::vector<std::string> not_merged_why;
   int fixed_segment = -1;
   PoseGraphSummary pose_graph;
-  ColmapModel model;  // the merged sparse model
+  ColmapModel model;  // the merged sparse model, with its frame rays
   std::vector<MergedDrive> drives;
   size_t input_points = 0;   // 3-D points of the merged segments
   size_t fused_points = 0;   // merged points made of more than one segment point

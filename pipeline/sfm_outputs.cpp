@@ -1,6 +1,7 @@
 #include "pipeline/sfm_outputs.h"
 
 #include <cmath>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -54,11 +55,17 @@ SfmOutputs WriteSfmOutputs(const Drive& drive, const SfmRunResult& run,
     WriteTum(poses, folder / "poses.tum");
     WriteTum(frame_poses, folder / "frame_poses.tum");
     WritePlyPoints(outputs.cloud, folder / "points.ply");
+    // Each image's name made once: std::filesystem::relative reads the links of every folder
+    // of the path, and the frame rays name the same images hundreds of thousands of times.
+    std::map<std::pair<int, int>, std::string> image_names;
     colmap = WriteColmapTextModel(
         rig, model,
-        [&drive](int frame, int camera) {
-          return std::filesystem::relative(drive.ImagePath(frame, camera), drive.folder())
-              .generic_string();
+        [&drive, &image_names](int frame, int camera) -> const std::string& {
+          auto [it, added] = image_names.try_emplace({frame, camera});
+          if (added)
+            it->second = std::filesystem::relative(drive.ImagePath(frame, camera), drive.folder())
+                             .generic_string();
+          return it->second;
         },
         folder / "sparse", outputs.cloud.colors);
   }

@@ -238,9 +238,16 @@ struct SfmRunner::Impl {
     }
   }
 
+  // A keyframe's and its frame rays' frames, the input's.
+  void ToInputFrames(FinalizedKeyframe* keyframe) const {
+    keyframe->frame = InputFrame(keyframe->frame);
+    for (FinalizedPoint& point : keyframe->points)
+      for (FinalizedFrameRay& ray : point.frame_rays) ray.frame = InputFrame(ray.frame);
+  }
+
   void HandOver() {
     for (FinalizedKeyframe& keyframe : tracker.TakeFinalized()) {
-      keyframe.frame = InputFrame(keyframe.frame);
+      ToInputFrames(&keyframe);
       if (callbacks.keyframe_finalised) callbacks.keyframe_finalised(keyframe);
       result.keyframes.push_back(std::move(keyframe));
     }
@@ -250,8 +257,7 @@ struct SfmRunner::Impl {
   // keyframe rebuilt from the corrected map, handed over again.
   void HandOverCorrectedMap() {
     result.keyframes = tracker.FinalizedSnapshot();
-    for (FinalizedKeyframe& keyframe : result.keyframes)
-      keyframe.frame = InputFrame(keyframe.frame);
+    for (FinalizedKeyframe& keyframe : result.keyframes) ToInputFrames(&keyframe);
     if (callbacks.map_corrected) callbacks.map_corrected(result.keyframes);
   }
 
@@ -462,8 +468,7 @@ SfmRunResult SfmRunner::Finish() {
   }
   if (s.options.final_frame_refinement && s.tracker.Initialised()) s.RefineFramePoses();
   result.model_keyframes = s.tracker.FinalizedSnapshot(/*all_rays=*/true);
-  for (FinalizedKeyframe& keyframe : result.model_keyframes)
-    keyframe.frame = s.InputFrame(keyframe.frame);
+  for (FinalizedKeyframe& keyframe : result.model_keyframes) s.ToInputFrames(&keyframe);
   result.front = s.builder.StageTimings();
   result.back = s.tracker.StageTimings();
   result.seconds = SecondsSince(s.start);

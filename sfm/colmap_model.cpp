@@ -6,6 +6,7 @@
 #include <unordered_map>
 
 #include "calib/atomic_file.h"
+#include "calib/colmap_text.h"
 
 namespace omni {
 
@@ -69,6 +70,7 @@ ColmapModelStats WriteColmapTextModel(
   std::ostringstream points;
   points << std::setprecision(10);
   std::ostringstream tracks;
+  std::vector<ColmapFrameRayPoint> frame_rays;
   double error_sum = 0.0;
   long point_id = 0;
   size_t point_index = 0;  // into colors
@@ -96,17 +98,23 @@ ColmapModelStats WriteColmapTextModel(
         point_error += error;
         ++observations;
       }
+      const Rgb8 color = index < colors.size() ? colors[index] : Rgb8(128, 128, 128);
+      if (!point.frame_rays.empty() && (observations > 0 || point.frame_point)) {
+        ColmapFrameRayPoint frame_ray_point;
+        frame_ray_point.point3d_id = observations > 0 ? static_cast<uint32_t>(id) : 0;
+        frame_ray_point.xyz = point.position;
+        frame_ray_point.color = color;
+        for (const FinalizedFrameRay& ray : point.frame_rays)
+          frame_ray_point.rays.push_back({image_name(ray.frame, ray.camera), ray.center});
+        frame_rays.push_back(std::move(frame_ray_point));
+      }
       if (observations == 0) {
         --point_id;
         continue;
       }
       points << id << ' ' << point.position.x() << ' ' << point.position.y() << ' '
              << point.position.z();
-      if (index < colors.size())
-        points << ' ' << int{colors[index][0]} << ' ' << int{colors[index][1]} << ' '
-               << int{colors[index][2]} << ' ';
-      else
-        points << " 128 128 128 ";
+      points << ' ' << int{color[0]} << ' ' << int{color[1]} << ' ' << int{color[2]} << ' ';
       points << point_error / observations << tracks.str() << '\n';
       error_sum += point_error;
       stats.observations += observations;
@@ -148,6 +156,12 @@ ColmapModelStats WriteColmapTextModel(
                           "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, "
                           "POINT2D_IDX)\n# Number of points: " +
                               std::to_string(stats.points) + "\n" + points.str());
+  // The rays of the frames between keyframes, which images.txt cannot hold.
+  if (!frame_rays.empty())
+    WriteTextFileAtomically(folder / "frame_rays.txt", FormatColmapFrameRays(frame_rays));
+  else
+    std::filesystem::remove(folder / "frame_rays.txt");
+  stats.frame_ray_points = static_cast<int>(frame_rays.size());
   return stats;
 }
 

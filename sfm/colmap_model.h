@@ -3,9 +3,10 @@
 // of the finalised keyframes of the tracker: one COLMAP camera per rig camera (models
 // PINHOLE, OPENCV or FULL_OPENCV, OPENCV_FISHEYE from calib's pinhole, opencv, fisheye), one
 // image per camera per keyframe named by `image_name` (e.g. "images/cam0/000123.png"), and one
-// 3-D point per finalised point with its observations as 2-D points. COLMAP puts pixel centres
-// at +0.5 (the image covers [0, width)), calib at integers: principal points and 2-D points
-// are shifted by 0.5.
+// 3-D point per finalised point with its observations as 2-D points; the points' rays of tracked
+// frames between keyframes and the frame points go to frame_rays.txt (calib/colmap_text.h).
+// COLMAP puts pixel centres at +0.5 (the image covers [0, width)), calib at integers: principal
+// points and 2-D points are shifted by 0.5.
 
 #include <Eigen/Core>
 #include <cstdint>
@@ -24,10 +25,12 @@ struct ColmapModelStats {
   int points = 0;
   int observations = 0;                  // 2-D points with a 3-D point
   double mean_reprojection_error = 0.0;  // pixels, over the observations
+  int frame_ray_points = 0;              // lines of frame_rays.txt
 };
 
-// Writes the three files into `folder` (created), each atomically. `image_name(frame, camera)`
-// names the image of a keyframe's frame. Points with no observation that projects are left out.
+// Writes the three files into `folder` (created), each atomically, and frame_rays.txt when a
+// point has frame rays (an earlier one is removed otherwise). `image_name(frame, camera)` names
+// the image of a frame. Points with no observation that projects are left out.
 // `colors`: empty (every point grey 128) or one RGB colour per point of `keyframes` in their
 // order, keyframe by keyframe (e.g. pipeline/point_colors.h).
 ColmapModelStats WriteColmapTextModel(

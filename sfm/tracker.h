@@ -244,7 +244,7 @@ struct FinalizedRay {
 // (TrackerOptions::frame_ray_step); `keyframe` is the keyframe before that frame.
 struct FinalizedFrameRay {
   int keyframe = -1;
-  int frame = -1;
+  int frame = -1;  // the tracker's count of frames (SfmRunner's results: the drive's index)
   int camera = -1;
   Eigen::Vector3d center = Eigen::Vector3d::Zero();  // optical centre, world
 };

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "calib/colmap_text.h"
 #include "calib/mesh_check.h"
 #include "calib/ply.h"
 #include "calib/tum.h"
@@ -92,6 +93,14 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   const auto b_frames = ReadTum(scratch / "b" / "frame_poses.tum");
   ASSERT_FALSE(b_frames.empty());
   EXPECT_NEAR(b_frames.front().timestamp, 40.0 / 15.0, 1e-6);
+  // So do the rays of its frames between keyframes (sparse/frame_rays.txt).
+  const ColmapModel b_model = ReadColmapModel(scratch / "b" / "sparse");
+  ASSERT_FALSE(b_model.frame_rays.empty());
+  for (const ColmapFrameRayPoint& line : b_model.frame_rays)
+    for (const ColmapFrameRay& ray : line.rays) {
+      const int frame = std::stoi(fs::path(ray.image_name).stem().string());
+      ASSERT_TRUE(frame >= 40 && frame <= 89) << ray.image_name;
+    }
 
   const fs::path city = scratch / "city";
   const auto merged = RunOmnisculpt(
@@ -156,6 +165,14 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   EXPECT_TRUE(CheckMesh(ReadPlyMesh(city / "surface.ply"), bounded).ok);
   EXPECT_TRUE(CheckMesh(ReadPlyMesh(city / "surface_closed.ply")).ok);
   EXPECT_EQ(ReadPlyPoints(city / "points.ply").points.size(), summary["points"].get<size_t>());
+  // The frame points of the frames between keyframes: each frame's from one segment, so more
+  // than either segment's and fewer than both's (they share 10 frames).
+  const size_t frame_points_a = summary["inputs"][0]["frame_points"].get<size_t>();
+  const size_t frame_points_b = summary["inputs"][1]["frame_points"].get<size_t>();
+  const size_t frame_points = summary["frame_points"].get<size_t>();
+  EXPECT_GT(frame_points, std::max(frame_points_a, frame_points_b));
+  EXPECT_LT(frame_points, frame_points_a + frame_points_b);
+  EXPECT_TRUE(fs::exists(city / "sparse" / "frame_rays.txt"));
 
   // A second merge into the same folder is refused without --force.
   const auto again = RunOmnisculpt(

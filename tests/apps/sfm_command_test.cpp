@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/colmap_text.h"
 #include "calib/ply.h"
 #include "calib/rig_io.h"
 #include "calib/tum.h"
@@ -119,8 +120,8 @@ double SummaryValue(const fs::path& out, const std::string& name) {
 }
 
 // The COLMAP text model read back by `surface --colmap`'s reader: one keyframe per keyframe of
-// poses.tum with its centre (the mean camera centre), every point of points.ply but the frame
-// points (no keyframe sees them, TrackerOptions::frame_points).
+// poses.tum with its centre (the mean camera centre), every point of points.ply, the frame
+// points (TrackerOptions::frame_points, which no keyframe sees) from sparse/frame_rays.txt.
 void CheckColmapModel(const fs::path& drive, const fs::path& out) {
   const std::vector<SurfaceKeyframe> colmap = LoadColmapKeyframes(out / "sparse");
   const std::vector<StampedPose> poses = ReadTum(out / "poses.tum");
@@ -136,8 +137,11 @@ void CheckColmapModel(const fs::path& drive, const fs::path& out) {
   }
   const double frame_points = SummaryValue(out, "frame_points");
   EXPECT_GT(frame_points, 0.0);
-  EXPECT_EQ(points + static_cast<size_t>(frame_points),
-            ReadPlyPoints(out / "points.ply").points.size());
+  EXPECT_EQ(points, ReadPlyPoints(out / "points.ply").points.size());
+  const ColmapModel model = ReadColmapModel(out / "sparse");
+  EXPECT_EQ(std::count_if(model.frame_rays.begin(), model.frame_rays.end(),
+                          [](const ColmapFrameRayPoint& line) { return line.point3d_id == 0; }),
+            static_cast<long>(frame_points));
 
   // images.txt and points3D.txt agree: every (IMAGE_ID, POINT2D_IDX) of a track is a 2-D point
   // of that image naming the track's point; one image per camera per keyframe.
@@ -175,7 +179,7 @@ void CheckColmapModel(const fs::path& drive, const fs::path& out) {
     }
     EXPECT_GE(observations, 2) << line;
   }
-  ASSERT_EQ(errors.size(), points);
+  ASSERT_EQ(errors.size() + static_cast<size_t>(frame_points), points);
   std::sort(errors.begin(), errors.end());
   EXPECT_LT(errors[errors.size() / 2], 1.0);
   EXPECT_LT(errors[errors.size() * 99 / 100], 3.0);

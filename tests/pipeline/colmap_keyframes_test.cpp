@@ -1,5 +1,6 @@
 // The COLMAP text reader of `surface --colmap` refuses malformed models naming the file and line;
-// the rig poses of a model's keyframes come back from a model made of known poses.
+// frame_rays.txt adds its rays and frame points to the keyframes; the rig poses of a model's
+// keyframes come back from a model made of known poses.
 
 #include "pipeline/colmap_keyframes.h"
 
@@ -7,6 +8,7 @@
 
 #include <Eigen/Geometry>
 #include <random>
+#include <set>
 #include <string>
 
 #include "calib/error.h"
@@ -24,6 +26,12 @@ ColmapTextModel ValidModel() {
       "2 1 0 0 0 -1 0 0 1 cam0/000002.png\n"
       "\n";
   model.points3d = "# points\n1 0 0 5 10 20 30 0.5 1 0 2 0\n2 1 1 5 0 0 0 0.5\n";
+  // Point 1 seen from frame 3 too; a frame point seen from frames 3 and 4, after the last
+  // keyframe.
+  model.frame_rays =
+      "# frame rays\n"
+      "1 0 0 5 10 20 30 1 cam0/000003.png 3 0 0\n"
+      "0 2 2 5 0 0 0 2 cam0/000003.png 0.25 0 0 cam0/000004.png 0.5 0 0\n";
   return model;
 }
 
@@ -33,7 +41,8 @@ std::string ParseError(const ColmapTextModel& model) {
   } catch (const InputError& error) {
     return error.what();
   }
-  ADD_FAILURE() << "no InputError for\n" << model.cameras << model.images << model.points3d;
+  ADD_FAILURE() << "no InputError for\n"
+                << model.cameras << model.images << model.points3d << model.frame_rays;
   return "";
 }
 
@@ -43,13 +52,70 @@ TEST(ColmapKeyframes, ValidModelReads) {
   ASSERT_EQ(keyframes.size(), 2u);
   EXPECT_EQ(keyframes[0].centre, Eigen::Vector3d::Zero());
   EXPECT_EQ(keyframes[1].centre, Eigen::Vector3d(1, 0, 0));
-  ASSERT_EQ(keyframes[1].points.size(), 1u);  // the observed point, in its latest keyframe
-  EXPECT_EQ(keyframes[1].points[0].rays.size(), 2u);
+  // The observed point in its latest keyframe, with its frame ray; the frame point after it.
+  ASSERT_EQ(keyframes[1].points.size(), 2u);
+  EXPECT_EQ(keyframes[1].points[0].rays.size(), 3u);
+  EXPECT_EQ(keyframes[1].points[0].rays[2].origin, Eigen::Vector3d(3, 0, 0));
   EXPECT_EQ(colors.at(PointId(1)), Rgb8(10, 20, 30));
+  EXPECT_EQ(keyframes[1].points[1].id, PointId(3));  // after the model's ids
+  EXPECT_EQ(keyframes[1].points[1].position, Eigen::Vector3d(2, 2, 5));
+  ASSERT_EQ(keyframes[1].points[1].rays.size(), 2u);
+  EXPECT_EQ(keyframes[1].points[1].rays[1].origin, Eigen::Vector3d(0.5, 0, 0));
+  // Without the frame rays: the keyframes' rays only.
+  ColmapTextModel without = ValidModel();
+  without.frame_rays.clear();
+  const std::vector<SurfaceKeyframe> plain = ParseColmapKeyframes(without, "m");
+  ASSERT_EQ(plain[1].points.size(), 1u);
+  EXPECT_EQ(plain[1].points[0].rays.size(), 2u);
   // The last image's (empty) line of 2D points may be missing at the end of the file.
   ColmapTextModel model = ValidModel();
   model.images.pop_back();
   EXPECT_EQ(ParseColmapKeyframes(model, "m").size(), 2u);
+}
+
+// A frame point goes to the latest keyframe at or before the last frame that saw it, the first
+// keyframe when it was seen before any; the files' text comes back from the model.
+TEST(ColmapKeyframes, AFramePointGoesToTheKeyframeBeforeItsLastFrame) {
+  ColmapTextModel text = ValidModel();
+  text.frame_rays +=
+      "0 7 7 7 1 2 3 1 cam0/000001.png 0 0 0\n"        // at keyframe 0 (frame 1)
+      "0 8 8 8 1 2 3 1 cam0/000000.png 0 0 0\n"        // before it: keyframe 0 too
+      "0 9 9 9 1 2 3 1 other/cam0/000002.png 0 0 0\n"  // "other/000002.png" sorts after both
+      "0 6 6 6 1 2 3 2 cam0/000001.png 0 0 0 cam0/000002.png 0 1 0\n";
+  std::unordered_map<PointId, Rgb8> colors;
+  const std::vector<SurfaceKeyframe> keyframes = ParseColmapKeyframes(text, "m", &colors);
+  ASSERT_EQ(keyframes.size(), 2u);
+  ASSERT_EQ(keyframes[0].points.size(), 2u);
+  EXPECT_EQ(keyframes[0].points[0].position, Eigen::Vector3d(7, 7, 7));
+  EXPECT_EQ(keyframes[0].points[1].position, Eigen::Vector3d(8, 8, 8));
+  ASSERT_EQ(keyframes[1].points.size(), 4u);
+  EXPECT_EQ(keyframes[1].points[2].position, Eigen::Vector3d(9, 9, 9));
+  EXPECT_EQ(keyframes[1].points[3].position, Eigen::Vector3d(6, 6, 6));
+  EXPECT_EQ(colors.at(keyframes[1].points[3].id), Rgb8(1, 2, 3));
+  // Ids distinct from every point's.
+  std::set<uint32_t> ids;
+  for (const SurfaceKeyframe& keyframe : keyframes)
+    for (const SurfacePoint& point : keyframe.points)
+      EXPECT_TRUE(ids.insert(point.id.value).second);
+
+  const ColmapModel model = ParseColmapModel(text, "m");
+  ASSERT_EQ(model.frame_rays.size(), 6u);
+  const ColmapModel again = ParseColmapModel(FormatColmapModel(model), "m");
+  ASSERT_EQ(again.frame_rays.size(), model.frame_rays.size());
+  for (size_t i = 0; i < model.frame_rays.size(); ++i) {
+    EXPECT_EQ(again.frame_rays[i].point3d_id, model.frame_rays[i].point3d_id);
+    EXPECT_EQ(again.frame_rays[i].xyz, model.frame_rays[i].xyz);
+    EXPECT_EQ(again.frame_rays[i].color, model.frame_rays[i].color);
+    ASSERT_EQ(again.frame_rays[i].rays.size(), model.frame_rays[i].rays.size());
+    for (size_t r = 0; r < model.frame_rays[i].rays.size(); ++r) {
+      EXPECT_EQ(again.frame_rays[i].rays[r].image_name, model.frame_rays[i].rays[r].image_name);
+      EXPECT_EQ(again.frame_rays[i].rays[r].centre, model.frame_rays[i].rays[r].centre);
+    }
+  }
+  // A model without frame rays writes no frame_rays.txt.
+  ColmapModel plain = model;
+  plain.frame_rays.clear();
+  EXPECT_TRUE(FormatColmapModel(plain).frame_rays.empty());
 }
 
 TEST(ColmapKeyframes, MalformedLinesNameTheFileAndLine) {
@@ -91,6 +157,18 @@ TEST(ColmapKeyframes, MalformedLinesNameTheFileAndLine) {
        "\"99999999999\""},
       {&ColmapTextModel::cameras, "640 480", "640 0",
        "model/cameras.txt: line 2: HEIGHT: expected an integer in [1, 65536], got \"0\""},
+      {&ColmapTextModel::frame_rays, "1 0 0 5 10 20 30 1", "3 0 0 5 10 20 30 1",
+       "model/frame_rays.txt: line 2: POINT3D_ID 3 is not in points3D.txt"},
+      {&ColmapTextModel::frame_rays, "0 2 2 5 0 0 0 2", "0 2 2 5 0 0 0 3",
+       "model/frame_rays.txt: line 3: NUM_RAYS is 3 but the line holds 2 rays"},
+      {&ColmapTextModel::frame_rays, "0 2 2 5 0 0 0 2", "0 2 2 5 0 0 0 0",
+       "model/frame_rays.txt: line 3: NUM_RAYS: expected an integer in [1, 4294967295], got "
+       "\"0\""},
+      {&ColmapTextModel::frame_rays, "cam0/000004.png 0.5 0 0", "cam0/000004.png 0.5 0",
+       "model/frame_rays.txt: line 3: expected POINT3D_ID X Y Z R G B NUM_RAYS RAYS[] (IMAGE_NAME "
+       "CX CY CZ), got 15 fields"},
+      {&ColmapTextModel::frame_rays, "cam0/000004.png 0.5 0 0", "cam0/000004.png 0.5 0 inf",
+       "model/frame_rays.txt: line 3: CZ: expected a decimal number, got \"inf\""},
   };
   for (const Case& c : cases) {
     ColmapTextModel model = ValidModel();

@@ -1,10 +1,10 @@
 // MergeSegments (pipeline/merge.h) on segments made in memory from one known trajectory: the
 // similarity between two segments is recovered from their shared frames, their images and
-// frames appear once, the points seen at one corner of a shared image are fused, and a segment
-// whose shared frames disagree is refused and left out. These segments have no images on disk:
+// frames appear once, the points seen at one corner of a shared image are fused, each frame's
+// frame rays come from one segment, and a segment whose shared frames disagree is refused and
+// left out. These segments have no images on disk:
 // the revisit search (tested on a real drive in tests/apps/merge_command_test.cpp) and the
 // global adjustment are off.
-
 
 #include "pipeline/merge.h"
 
@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <cstdio>
+#include <map>
 
 namespace omni {
 namespace {
@@ -22,7 +23,6 @@ MergeOptions InMemoryOptions() {
   options.global_bundle_adjustment = false;
   return options;
 }
-
 
 // A curved drive: frame f at (f, 0.05 f², 0), turning about z.
 Rigid3d TrueWorldFromRig(size_t f) {
@@ -133,6 +133,80 @@ TEST(MergeSegments, RecoversTheSimilarityAndFusesTheSharedCorners) {
     EXPECT_GE(point.track.size(), 1u);
     EXPECT_LE(point.track.size(), 2u);
   }
+}
+
+// A ray's optical centre in the rig (true metres).
+const Eigen::Vector3d kCentreInRig(0.2, -0.1, 0.05);
+
+// The segment's frame rays, in its world: for each frame f, a frame point at (f, -10, 1) seen
+// from frames f and f + 1 (within the segment), and a ray of frame f + 2 for the point of frame f.
+void AddFrameRays(const Sim3d& segment_from_true, MergeSegment* segment) {
+  const auto ray = [&](size_t f) {
+    return ColmapFrameRay{"images/cam0/" + FrameName(f) + ".png",
+                          segment_from_true * (TrueWorldFromRig(f) * kCentreInRig)};
+  };
+  for (size_t f = segment->first_frame; f <= segment->last_frame; ++f) {
+    ColmapFrameRayPoint frame_point;
+    frame_point.xyz = segment_from_true * Eigen::Vector3d(f, -10.0, 1.0);
+    frame_point.color = Rgb8(static_cast<uint8_t>(f), 0, 0);
+    frame_point.rays.push_back(ray(f));
+    if (f < segment->last_frame) frame_point.rays.push_back(ray(f + 1));
+    segment->model.frame_rays.push_back(frame_point);
+    if (f + 2 > segment->last_frame) continue;
+    ColmapFrameRayPoint map_point;
+    map_point.point3d_id = static_cast<uint32_t>(f + 100);
+    map_point.xyz = segment_from_true * Eigen::Vector3d(f, 10.0, 1.0);
+    map_point.rays.push_back(ray(f + 2));
+    segment->model.frame_rays.push_back(map_point);
+  }
+}
+
+// The frame rays of two segments in the city: every frame's rays once (from the segment that
+// poses the frame), each frame point once, all at their true places.
+TEST(MergeSegments, TheFrameRaysOfEachFrameComeFromTheSegmentThatPosesIt) {
+  const Sim3d a_from_true;
+  const Sim3d b_from_true(
+      0.7, Eigen::Quaterniond(Eigen::AngleAxisd(0.5, Eigen::Vector3d(1, 2, 3).normalized())),
+      Eigen::Vector3d(4, -2, 7));
+  std::vector<MergeSegment> segments = {MakeSegment(0, 14, a_from_true, "a"),
+                                        MakeSegment(8, 25, b_from_true, "b")};
+  AddFrameRays(a_from_true, &segments[0]);
+  AddFrameRays(b_from_true, &segments[1]);
+  const MergeResult result = MergeSegments(segments, InMemoryOptions());
+  ASSERT_TRUE(result.merged[0] && result.merged[1]);
+  // Frames 8-11 are posed by a, 12-25 by b: a keeps its frame points whose last frame is at
+  // most 11 (those of frames 0-10), b those of frames 11-25; a keeps the rays of frames up to
+  // 11 (points 0-9), b those of frames 12 and after (points 10-23).
+  std::map<size_t, int> frame_points;  // true frame -> count
+  std::map<size_t, int> map_point_rays;
+  for (const ColmapFrameRayPoint& line : result.model.frame_rays) {
+    std::vector<size_t> frames;
+    for (const ColmapFrameRay& ray : line.rays) {
+      const size_t f = std::stoul(ray.image_name.substr(12, 6));
+      frames.push_back(f);
+      const Eigen::Vector3d expected = b_from_true * (TrueWorldFromRig(f) * kCentreInRig);
+      EXPECT_LT((ray.centre - expected).norm(), 1e-8) << ray.image_name;
+    }
+    if (line.point3d_id == 0) {
+      const size_t f = frames.front();
+      ++frame_points[f];
+      EXPECT_LT((line.xyz - b_from_true * Eigen::Vector3d(f, -10.0, 1.0)).norm(), 1e-8) << f;
+      EXPECT_EQ(line.color, Rgb8(static_cast<uint8_t>(f), 0, 0));
+      EXPECT_EQ(frames.size(), f < 25 ? 2u : 1u) << f;
+    } else {
+      ASSERT_EQ(frames.size(), 1u);
+      const size_t f = frames.front() - 2;
+      ++map_point_rays[f];
+      const ColmapPoint3D& point = result.model.points.at(line.point3d_id - 1);
+      EXPECT_EQ(point.id, line.point3d_id);
+      EXPECT_LT((point.xyz - b_from_true * Eigen::Vector3d(f, 10.0, 1.0)).norm(), 1e-8) << f;
+    }
+  }
+  ASSERT_EQ(frame_points.size(), 26u);
+  for (const auto& [f, count] : frame_points) EXPECT_EQ(count, 1) << f;
+  ASSERT_EQ(map_point_rays.size(), 24u);
+  for (const auto& [f, count] : map_point_rays) EXPECT_EQ(count, 1) << f;
+  EXPECT_EQ(map_point_rays.rbegin()->first, 23u);
 }
 
 TEST(MergeSegments, ASegmentWhoseSharedFramesDisagreeIsLeftOut) {

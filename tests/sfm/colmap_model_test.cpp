@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "calib/colmap_text.h"
 #include "sfm/synthetic.h"
 
 namespace omni {
@@ -165,6 +166,71 @@ TEST(ColmapModel, WritesThePointColoursInTheKeyframesOrder) {
   const std::vector<Eigen::Vector3i> grey = colours_written({});
   ASSERT_EQ(grey.size(), 2u);
   EXPECT_EQ(grey[1], Eigen::Vector3i(128, 128, 128));
+  std::filesystem::remove_all(folder);
+}
+
+// frame_rays.txt: a point of points3D.txt with rays of frames between keyframes is listed under
+// its POINT3D_ID, a frame point under 0, each ray with its frame's image name and centre; a point
+// without a frame ray, or one left out of points3D.txt, is not. A model without frame rays
+// removes an earlier frame_rays.txt.
+TEST(ColmapModel, WritesTheFrameRaysBesideTheModel) {
+  const Rig rig = MakeSyntheticRingRig(1, false, 0.1);
+  FinalizedKeyframe keyframe;
+  keyframe.keyframe = 0;
+  keyframe.frame = 4;
+  auto observed = [&](double y) {
+    FinalizedPoint point;
+    point.position = Eigen::Vector3d(3.0, y, 0.1);
+    point.rays.push_back({0, Eigen::Vector3d::Zero(), 0,
+                          (rig.cameras[0].cam_from_rig * point.position).normalized()});
+    return point;
+  };
+  keyframe.points.push_back(observed(-0.5));  // no frame ray
+  keyframe.points.push_back(observed(0.5));
+  keyframe.points.back().frame_rays.push_back({0, 5, 0, Eigen::Vector3d(0.1, 0.2, 0.3)});
+  keyframe.points.back().frame_rays.push_back({0, 6, 0, Eigen::Vector3d(0.2, 0.2, 0.3)});
+  FinalizedPoint behind = observed(0.0);  // behind the camera: not in points3D.txt
+  behind.position = Eigen::Vector3d(-3.0, 0.0, 0.1);
+  behind.rays[0].bearing = -Eigen::Vector3d::UnitZ();
+  behind.frame_rays.push_back({0, 5, 0, Eigen::Vector3d::Zero()});
+  keyframe.points.push_back(behind);
+  FinalizedPoint frame_point;
+  frame_point.frame_point = true;
+  frame_point.position = Eigen::Vector3d(2.0, 1.0, 0.5);
+  frame_point.frame_rays.push_back({0, 7, 0, Eigen::Vector3d(0.4, 0.0, 0.0)});
+  keyframe.points.push_back(frame_point);
+  const std::filesystem::path folder =
+      std::filesystem::temp_directory_path() /
+      ("omni_colmap_model_frame_rays_test_" + std::to_string(::getpid()));
+  const auto name = [](int frame, int camera) {
+    return "images/cam" + std::to_string(camera) + "/" + std::to_string(frame) + ".png";
+  };
+  const ColmapModelStats stats = WriteColmapTextModel(rig, {keyframe}, name, folder,
+                                                      {{1, 1, 1}, {2, 2, 2}, {3, 3, 3}, {4, 5, 6}});
+  EXPECT_EQ(stats.points, 2);
+  EXPECT_EQ(stats.frame_ray_points, 2);
+  const ColmapModel model = ReadColmapModel(folder);
+  ASSERT_EQ(model.points.size(), 2u);
+  ASSERT_EQ(model.frame_rays.size(), 2u);
+  const ColmapFrameRayPoint& map_point = model.frame_rays[0];
+  EXPECT_EQ(map_point.point3d_id, model.points[1].id);
+  EXPECT_LT((model.points[1].xyz - Eigen::Vector3d(3.0, 0.5, 0.1)).norm(), 1e-9);
+  EXPECT_LT((map_point.xyz - Eigen::Vector3d(3.0, 0.5, 0.1)).norm(), 1e-9);
+  EXPECT_EQ(map_point.color, Rgb8(2, 2, 2));
+  ASSERT_EQ(map_point.rays.size(), 2u);
+  EXPECT_EQ(map_point.rays[1].image_name, "images/cam0/6.png");
+  EXPECT_LT((map_point.rays[1].centre - Eigen::Vector3d(0.2, 0.2, 0.3)).norm(), 1e-9);
+  const ColmapFrameRayPoint& frame = model.frame_rays[1];
+  EXPECT_EQ(frame.point3d_id, 0u);
+  EXPECT_LT((frame.xyz - Eigen::Vector3d(2.0, 1.0, 0.5)).norm(), 1e-9);
+  EXPECT_EQ(frame.color, Rgb8(4, 5, 6));
+  ASSERT_EQ(frame.rays.size(), 1u);
+  EXPECT_EQ(frame.rays[0].image_name, "images/cam0/7.png");
+
+  keyframe.points.resize(1);
+  WriteColmapTextModel(rig, {keyframe}, name, folder);
+  EXPECT_FALSE(std::filesystem::exists(folder / "frame_rays.txt"));
+  EXPECT_TRUE(ReadColmapModel(folder).frame_rays.empty());
   std::filesystem::remove_all(folder);
 }
 

@@ -116,8 +116,14 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   OutputFolder folder(fs::path(o.out), "merge.json", o.force, "merge");
   const fs::path out = folder.path();
   const auto align_start = Clock::now();
-  const MergeResult merged = MergeSegments(segments, o.merge);
+  MergeResult merged = MergeSegments(segments, o.merge);
   const double align_seconds = SecondsSince(align_start);
+  // The segments' frame rays are in the merged model now: their memory goes before the surface's.
+  std::vector<size_t> input_frame_points;
+  for (MergeSegment& segment : segments) {
+    input_frame_points.push_back(FramePoints(segment.model));
+    std::vector<ColmapFrameRayPoint>().swap(segment.model.frame_rays);
+  }
   size_t segments_merged = 0;
   for (size_t s = 0; s < segments.size(); ++s) {
     if (merged.merged[s]) {
@@ -130,11 +136,18 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
 
   // The merged map's files.
   WriteColmapModel(merged.model, out / "sparse");
+  // points.ply: the map's points, then the frame points (as `reconstruct` writes it).
   PointCloud cloud;
   for (const ColmapPoint3D& point : merged.model.points) {
     if (point.track.empty()) continue;
     cloud.points.push_back(point.xyz);
     cloud.colors.push_back(point.color);
+  }
+  const size_t map_points = cloud.points.size();
+  for (const ColmapFrameRayPoint& line : merged.model.frame_rays) {
+    if (line.point3d_id != 0) continue;
+    cloud.points.push_back(line.xyz);
+    cloud.colors.push_back(line.color);
   }
   WritePlyPoints(cloud, out / "points.ply");
   for (const MergedDrive& drive : merged.drives) {
@@ -149,6 +162,8 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   std::unordered_map<PointId, Rgb8> point_colors;
   Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
   const std::vector<SurfaceKeyframe> stream = ColmapKeyframes(merged.model, &point_colors, &up);
+  const size_t frame_points = FramePoints(merged.model);
+  std::vector<ColmapFrameRayPoint>().swap(merged.model.frame_rays);  // in the stream now
   o.sculptor.up = up;
   IncrementalSculptor sculptor(o.sculptor);
   std::vector<KeyframeStats> stats;
@@ -200,7 +215,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
                             {"keyframes", segments[s].keyframe_poses.size()},
                             {"frames_tracked", segments[s].frame_poses.size()},
                             {"points", segments[s].model.points.size()},
-                            {"frame_points", FramePoints(segments[s].model)},
+                            {"frame_points", input_frame_points[s]},
                             {"merged", bool(merged.merged[s])}};
     if (merged.merged[s]) {
       input["city_from_segment"] = Sim3Json(merged.city_from_segment[s]);
@@ -270,9 +285,9 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
       {"images", merged.model.images.size()},
       {"shared_images", merged.shared_images},
       {"points_in", merged.input_points},
-      {"points", cloud.points.size()},
+      {"points", map_points},
       {"points_fused", merged.fused_points},
-      {"frame_points", FramePoints(merged.model)},
+      {"frame_points", frame_points},
       {"keyframes", stream.size()},
       {"final_batch", {{"ran", batch.sculptor != nullptr}, {"seconds", batch.seconds}}},
       {"uncertain_rays", uncertain_rays},
@@ -293,16 +308,17 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   folder.Keep();
   std::printf(
       "merge: %zu of %zu inputs merged (%zu missing, %zu not joined), %zu overlaps verified; "
-      "%zu images (%zu shared), %zu points (%zu fused from %zu); %zu keyframes sculpted, %zu "
+      "%zu images (%zu shared), %zu points (%zu fused from %zu) and %zu frame points; %zu "
+      "keyframes sculpted, %zu "
       "observed triangles of %zu (manifold with boundary %s, closed %s) in %.1f s\n"
       "  wrote %s (merge.json says what was aligned with what)\n",
       segments_merged, o.inputs.size(), missing.size(), segments.size() - segments_merged,
       static_cast<size_t>(std::count_if(merged.overlaps.begin(), merged.overlaps.end(),
                                         [](const MergeOverlap& x) { return x.verified; })),
-      merged.model.images.size(), merged.shared_images, cloud.points.size(), merged.fused_points,
-      merged.input_points, stream.size(), mesh.triangles.size(), closed.triangles.size(),
-      manifold.ok ? "yes" : "NO", closed_manifold.ok ? "yes" : "NO", SecondsSince(start),
-      out.c_str());
+      merged.model.images.size(), merged.shared_images, map_points, merged.fused_points,
+      merged.input_points, cloud.points.size() - map_points, stream.size(), mesh.triangles.size(),
+      closed.triangles.size(), manifold.ok ? "yes" : "NO", closed_manifold.ok ? "yes" : "NO",
+      SecondsSince(start), out.c_str());
   if (!failure.empty()) {
     ReportNotUsable(o.out + ": " + failure);
   } else {

@@ -164,7 +164,8 @@ TEST(MergeCommandShortDrive, OverlappingSegmentsMergeIntoOneMapAsGoodAsOneRun) {
   bounded.allow_boundary = true;
   EXPECT_TRUE(CheckMesh(ReadPlyMesh(city / "surface.ply"), bounded).ok);
   EXPECT_TRUE(CheckMesh(ReadPlyMesh(city / "surface_closed.ply")).ok);
-  EXPECT_EQ(ReadPlyPoints(city / "points.ply").points.size(), summary["points"].get<size_t>());
+  EXPECT_EQ(ReadPlyPoints(city / "points.ply").points.size(),
+            summary["points"].get<size_t>() + summary["frame_points"].get<size_t>());
   // The frame points of the frames between keyframes: each frame's from one segment, so more
   // than either segment's and fewer than both's (they share 10 frames).
   const size_t frame_points_a = summary["inputs"][0]["frame_points"].get<size_t>();

@@ -375,6 +375,18 @@ TEST(MergeCommandShortDrive, TwoDrivesAreJoinedWhereTheyPassTheSamePlaces) {
   EXPECT_GE(from_first, 70u / 4);
   EXPECT_GE(joined.size() - from_first, 60u / 4);
   EXPECT_LT(evaluation.registration_rms, 0.05);  // 5 cm: 0.05 % of the 103 m driven
+  // The two drives share no frame: each keeps all its frame points, every ray named in its
+  // drive's folder of the merged model.
+  EXPECT_EQ(summary["frame_points"].get<size_t>(),
+            summary["inputs"][0]["frame_points"].get<size_t>() +
+                summary["inputs"][1]["frame_points"].get<size_t>());
+  const ColmapModel model = ReadColmapModel(city / "sparse");
+  ASSERT_FALSE(model.frame_rays.empty());
+  for (const ColmapFrameRayPoint& line : model.frame_rays)
+    for (const ColmapFrameRay& ray : line.rays)
+      ASSERT_TRUE(ray.image_name.rfind(first_label + "/", 0) == 0 ||
+                  ray.image_name.rfind(second_label + "/", 0) == 0)
+          << ray.image_name;
   MeshCheckOptions bounded;
   bounded.allow_boundary = true;
   EXPECT_TRUE(CheckMesh(ReadPlyMesh(city / "surface.ply"), bounded).ok);

@@ -77,8 +77,9 @@ nlohmann::json Sim3Json(const Sim3d& s) {
           {"quaternion_wxyz", {s.rotation.w(), s.rotation.x(), s.rotation.y(), s.rotation.z()}}};
 }
 
-double Quantile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
+// The q-quantile of v, null when v is empty.
+nlohmann::json Quantile(std::vector<double> v, double q) {
+  if (v.empty()) return nullptr;
   std::sort(v.begin(), v.end());
   return v[std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())))];
 }
@@ -165,20 +166,24 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   const size_t frame_points = FramePoints(merged.model);
   std::vector<ColmapFrameRayPoint>().swap(merged.model.frame_rays);  // in the stream now
   o.sculptor.up = up;
-  IncrementalSculptor sculptor(o.sculptor);
-  std::vector<KeyframeStats> stats;
-  for (size_t i = 0; i < stream.size(); ++i) {
-    const std::vector<KeyframeStats> new_stats = sculptor.AddKeyframe(stream[i]);
-    stats.insert(stats.end(), new_stats.begin(), new_stats.end());
-    if (!global.quiet && (i + 1) % 100 == 0)
-      spdlog::info("merge: surface, keyframe {}/{}", i + 1, stream.size());
+  // With the final batch (the default) only that batch is sculpted: the keyframe-by-keyframe
+  // surface before it would not be written (SculptBatchOnly).
+  FinalBatch batch = o.final_batch ? SculptBatchOnly(o.sculptor, stream) : FinalBatch{};
+  std::unique_ptr<IncrementalSculptor> sculptor;
+  std::vector<KeyframeStats> stats = batch.stats;
+  if (!batch.sculptor) {
+    sculptor = std::make_unique<IncrementalSculptor>(o.sculptor);
+    for (size_t i = 0; i < stream.size(); ++i) {
+      const std::vector<KeyframeStats> new_stats = sculptor->AddKeyframe(stream[i]);
+      stats.insert(stats.end(), new_stats.begin(), new_stats.end());
+      if (!global.quiet && (i + 1) % 100 == 0)
+        spdlog::info("merge: surface, keyframe {}/{}", i + 1, stream.size());
+    }
+    const std::vector<KeyframeStats> last_stats = sculptor->Finish();
+    stats.insert(stats.end(), last_stats.begin(), last_stats.end());
   }
-  const std::vector<KeyframeStats> last_stats = sculptor.Finish();
-  stats.insert(stats.end(), last_stats.begin(), last_stats.end());
-  const FinalBatch batch =
-      o.final_batch ? SculptFinalBatch(o.sculptor, sculptor, stats, stream) : FinalBatch{};
   ColoredSurfaces surfaces =
-      ExtractColoredSurfaces(batch.sculptor ? *batch.sculptor : sculptor, point_colors);
+      ExtractColoredSurfaces(batch.sculptor ? *batch.sculptor : *sculptor, point_colors);
   const TriangleMesh& closed = surfaces.closed;
   const TriangleMesh& mesh = surfaces.observed;
   if (!closed.triangles.empty()) {
@@ -196,8 +201,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   WriteTextFileAtomically(out / "stats" / "keyframes.csv", csv.str());
   const double surface_seconds = SecondsSince(surface_start);
   size_t uncertain_rays = 0;  // of the surface written
-  for (const KeyframeStats& st : batch.sculptor ? batch.stats : stats)
-    uncertain_rays += st.rays_uncertain;
+  for (const KeyframeStats& st : stats) uncertain_rays += st.rays_uncertain;
   MeshCheckOptions bounded;
   bounded.allow_boundary = true;
   bounded.allow_empty = !closed.triangles.empty();
@@ -295,7 +299,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
       {"manifold", manifold.ok},
       {"closed_triangles", closed.triangles.size()},
       {"closed_manifold", closed_manifold.ok},
-      {"surface_ms_median", Quantile(surface_ms, 0.5)},
+      {"surface_ms_median", Quantile(surface_ms, 0.5)},  // null: no keyframe by keyframe
       {"surface_ms_p95", Quantile(surface_ms, 0.95)},
       {"seconds",
        {{"load", load_seconds},

@@ -90,22 +90,42 @@ double ReplayScale(double scale, double reference_spacing,
   return scale * ratio;
 }
 
-FinalBatch SculptFinalBatch(const SculptorOptions& base, const IncrementalSculptor& streamed,
-                            const std::vector<KeyframeStats>& streamed_stats,
-                            const std::vector<SurfaceKeyframe>& keyframes) {
+namespace {
+
+// Every keyframe in one batch at s.
+FinalBatch SculptOneBatch(const SculptorOptions& base, double scale,
+                          const std::vector<SurfaceKeyframe>& keyframes) {
   FinalBatch batch;
-  const bool incremental = std::any_of(streamed_stats.begin(), streamed_stats.end(),
-                                       [](const KeyframeStats& st) { return !st.batch; });
-  if (!(streamed.scale() > 0.0) || !incremental) return batch;
   const auto start = std::chrono::steady_clock::now();
   batch.sculptor = std::make_unique<IncrementalSculptor>(
-      ReplaySculptorOptions(base, LoopReplay::kBatch, streamed.scale(), keyframes.size()));
+      ReplaySculptorOptions(base, LoopReplay::kBatch, scale, keyframes.size()));
   for (const SurfaceKeyframe& keyframe : keyframes) {
     for (const KeyframeStats& st : batch.sculptor->AddKeyframe(keyframe)) batch.stats.push_back(st);
   }
   for (const KeyframeStats& st : batch.sculptor->Finish()) batch.stats.push_back(st);
   batch.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return batch;
+}
+
+}  // namespace
+
+FinalBatch SculptFinalBatch(const SculptorOptions& base, const IncrementalSculptor& streamed,
+                            const std::vector<KeyframeStats>& streamed_stats,
+                            const std::vector<SurfaceKeyframe>& keyframes) {
+  const bool incremental = std::any_of(streamed_stats.begin(), streamed_stats.end(),
+                                       [](const KeyframeStats& st) { return !st.batch; });
+  if (!(streamed.scale() > 0.0) || !incremental) return {};
+  return SculptOneBatch(base, streamed.scale(), keyframes);
+}
+
+FinalBatch SculptBatchOnly(const SculptorOptions& base,
+                           const std::vector<SurfaceKeyframe>& keyframes) {
+  // The keyframe-by-keyframe sculpting sculpts one by one what comes after its first batch.
+  const bool incremental = !base.batch_init || (base.scale > 0.0 && !base.batch_with_known_scale) ||
+                           keyframes.size() > static_cast<size_t>(base.init_keyframes);
+  const double scale = MeasureScale(base, keyframes);
+  if (!(scale > 0.0) || !incremental) return {};
+  return SculptOneBatch(base, scale, keyframes);
 }
 
 namespace {

@@ -162,6 +162,13 @@ FinalBatch SculptFinalBatch(const SculptorOptions& base, const IncrementalSculpt
                             const std::vector<KeyframeStats>& streamed_stats,
                             const std::vector<SurfaceKeyframe>& keyframes);
 
+// The same final batch without the keyframe-by-keyframe sculpting before it: every keyframe in
+// one batch at the s that sculpting would measure on them (MeasureScale of surface/sculptor.h),
+// so the surface SculptFinalBatch writes, for the batch's time alone. Not run (sculptor null)
+// when no s is measured or the keyframes fit in the first batch (SculptFinalBatch would not run).
+FinalBatch SculptBatchOnly(const SculptorOptions& base,
+                           const std::vector<SurfaceKeyframe>& keyframes);
+
 // KeyframeStatsCsvHeader() and the pipeline's columns (queue_ms).
 std::string PipelineKeyframesCsvHeader();
 std::string PipelineKeyframesCsvRow(const PipelineKeyframeRow& row);

@@ -208,7 +208,83 @@ std::vector<std::pair<Point, const SurfacePoint*>> SpatiallySorted(
   return sorted;
 }
 
+// The smallest cosine of the angle between two rays of p (1 with fewer than two rays), or the
+// first one below stop_below: whether p passes the aperture filter, and when it does not, its
+// aperture (the walk over every pair done once).
+double MinRayCosine(const SurfacePoint& p, double stop_below) {
+  double min_cos = 1.0;
+  for (size_t i = 0; i < p.rays.size(); ++i) {
+    const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
+    for (size_t j = i + 1; j < p.rays.size(); ++j) {
+      const Eigen::Vector3d b = (p.rays[j].origin - p.position).normalized();
+      min_cos = std::min(min_cos, a.dot(b));
+      if (min_cos < stop_below) return min_cos;
+    }
+  }
+  return min_cos;
+}
+
+double MinApertureCosine(const SculptorOptions& options) {
+  return std::cos(options.min_aperture_deg * M_PI / 180.0);
+}
+
+// Two rays of p more than min_aperture_deg apart (the aperture filter of §5.1).
+bool WideAperture(const SculptorOptions& options, const SurfacePoint& p) {
+  const double cos_min = MinApertureCosine(options);
+  return MinRayCosine(p, cos_min) < cos_min;
+}
+
+// SculptorOptions::reach_quantile: the distance of the first keyframes' points with a wide
+// aperture to their keyframe centre, at that quantile (0 when off or without such a point).
+double MeasuredReach(const SculptorOptions& options, const std::vector<SurfaceKeyframe>& first) {
+  if (options.reach_quantile == 0.0 || !options.filter_points) return 0.0;
+  std::vector<double> distances;
+  for (const SurfaceKeyframe& kf : first) {
+    for (const SurfacePoint& p : kf.points) {
+      if (p.position.allFinite() && WideAperture(options, p)) {
+        distances.push_back((p.position - kf.centre).norm());
+      }
+    }
+  }
+  if (distances.empty()) return 0.0;
+  const size_t k =
+      std::min(distances.size() - 1,
+               static_cast<size_t>(options.reach_quantile * static_cast<double>(distances.size())));
+  std::nth_element(distances.begin(), distances.begin() + static_cast<long>(k), distances.end());
+  return distances[k];
+}
+
+// s measured on the first keyframes (SculptorOptions::scale when given): their mean spacing or,
+// when larger, the points' reach over max_ray_length_factor. 0 when they do not move.
+double ScaleOfFirstKeyframes(const SculptorOptions& options,
+                             const std::vector<SurfaceKeyframe>& first, double* spacing,
+                             double* reach) {
+  *spacing = 0.0;
+  *reach = 0.0;
+  if (options.scale != 0.0) return options.scale;
+  *spacing = MeanKeyframeSpacing(first, first.size());
+  *reach = MeasuredReach(options, first);
+  if (*spacing > 0.0 && *reach > options.max_ray_length_factor * *spacing)
+    return *reach / options.max_ray_length_factor;
+  return *spacing;
+}
+
 }  // namespace
+
+double MeasureScale(const SculptorOptions& options, const std::vector<SurfaceKeyframe>& keyframes) {
+  if (options.scale != 0.0) return options.scale;
+  // As IncrementalSculptor: the keyframes in groups of init_keyframes until a group moves.
+  const size_t group = static_cast<size_t>(std::max(1, options.init_keyframes));
+  for (size_t begin = 0; begin < keyframes.size(); begin += group) {
+    const std::vector<SurfaceKeyframe> first(
+        keyframes.begin() + static_cast<long>(begin),
+        keyframes.begin() + static_cast<long>(std::min(keyframes.size(), begin + group)));
+    double spacing = 0.0, reach = 0.0;
+    const double s = ScaleOfFirstKeyframes(options, first, &spacing, &reach);
+    if (s > 0.0) return s;
+  }
+  return 0.0;
+}
 
 struct IncrementalSculptor::Impl {
   // A segment of a ray: its origin and its end.
@@ -357,19 +433,13 @@ struct IncrementalSculptor::Impl {
   }
 
   void SetScale(const std::vector<SurfaceKeyframe>& first) {
-    s = options.scale;
-    if (s == 0.0) {
-      spacing = MeanKeyframeSpacing(first, first.size());
-      s = spacing;
-      const double reach = MeasuredReach(first);
-      if (spacing > 0.0 && reach > options.max_ray_length_factor * spacing) {
-        s = reach / options.max_ray_length_factor;
-        spdlog::info(
-            "surface: s = {:.3f} from the points' reach {:.2f} (keyframe spacing {:.3f}; "
-            "r = {:.1f} s)",
-            s, reach, spacing, options.max_ray_length_factor);
-      }
-    }
+    double reach = 0.0;
+    s = ScaleOfFirstKeyframes(options, first, &spacing, &reach);
+    if (options.scale == 0.0 && s > spacing)
+      spdlog::info(
+          "surface: s = {:.3f} from the points' reach {:.2f} (keyframe spacing {:.3f}; "
+          "r = {:.1f} s)",
+          s, reach, spacing, options.max_ray_length_factor);
     if (!(s > 0.0)) {
       spdlog::warn("surface: keyframe centres do not move (s = 0); nothing to sculpt");
       return;
@@ -392,22 +462,7 @@ struct IncrementalSculptor::Impl {
     grid_origin = first.front().centre + step * Eigen::Vector3d(0.3183, 0.2718, 0.1414);
   }
 
-  // The smallest cosine of the angle between two rays of p (1 with fewer than two rays), or the
-  // first one below stop_below: whether p passes the aperture filter, and when it does not, its
-  // aperture (the walk over every pair done once).
-  static double MinRayCosine(const SurfacePoint& p, double stop_below) {
-    double min_cos = 1.0;
-    for (size_t i = 0; i < p.rays.size(); ++i) {
-      const Eigen::Vector3d a = (p.rays[i].origin - p.position).normalized();
-      for (size_t j = i + 1; j < p.rays.size(); ++j) {
-        const Eigen::Vector3d b = (p.rays[j].origin - p.position).normalized();
-        min_cos = std::min(min_cos, a.dot(b));
-        if (min_cos < stop_below) return min_cos;
-      }
-    }
-    return min_cos;
-  }
-  double MinApertureCosine() const { return std::cos(options.min_aperture_deg * M_PI / 180.0); }
+  double MinApertureCosine() const { return omni::MinApertureCosine(options); }
 
   // SculptorOptions::uncertain_ray_margin_deg: the shortened rays of p (dropped by the aperture
   // filter, its rays' smallest cosine min_cos), appended to *segments as (origin, end).
@@ -424,31 +479,7 @@ struct IncrementalSculptor::Impl {
     }
   }
 
-  // Two rays of p more than min_aperture_deg apart (the aperture filter of §5.1).
-  bool WideAperture(const SurfacePoint& p) const {
-    const double cos_min = MinApertureCosine();
-    return MinRayCosine(p, cos_min) < cos_min;
-  }
-
-  // SculptorOptions::reach_quantile: the distance of the first keyframes' points with a wide
-  // aperture to their keyframe centre, at that quantile (0 when off or without such a point).
-  double MeasuredReach(const std::vector<SurfaceKeyframe>& first) const {
-    if (options.reach_quantile == 0.0 || !options.filter_points) return 0.0;
-    std::vector<double> distances;
-    for (const SurfaceKeyframe& kf : first) {
-      for (const SurfacePoint& p : kf.points) {
-        if (p.position.allFinite() && WideAperture(p)) {
-          distances.push_back((p.position - kf.centre).norm());
-        }
-      }
-    }
-    if (distances.empty()) return 0.0;
-    const size_t k = std::min(
-        distances.size() - 1,
-        static_cast<size_t>(options.reach_quantile * static_cast<double>(distances.size())));
-    std::nth_element(distances.begin(), distances.begin() + static_cast<long>(k), distances.end());
-    return distances[k];
-  }
+  bool WideAperture(const SurfacePoint& p) const { return omni::WideAperture(options, p); }
 
   // SculptorOptions::ground_quantile: g, the depth of the ground under the first keyframes'
   // centres (0 when off, without a point with a wide aperture or when that height is not below).

@@ -337,6 +337,11 @@ void ColorMeshVertices(const std::vector<PointId>& vertex_points,
 // than two): the keyframe spacing that s is measured from (SculptorOptions::scale).
 double MeanKeyframeSpacing(const std::vector<SurfaceKeyframe>& keyframes, size_t count);
 
+// The s that an IncrementalSculptor with these options measures on `keyframes` as its stream
+// (SculptorOptions::scale: on the first init_keyframes, or the next ones when those do not move;
+// options.scale when given); 0 when none moves.
+double MeasureScale(const SculptorOptions& options, const std::vector<SurfaceKeyframe>& keyframes);
+
 // The surface time per keyframe of a step: its ms_total over its keyframes (amortised when
 // SculptorOptions::keyframes_per_step sculpts several at once).
 double MsPerKeyframe(const KeyframeStats& stats);

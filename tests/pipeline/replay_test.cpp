@@ -1,6 +1,7 @@
 // The surface after a loop closure in `omnisculpt reconstruct`: the corrected map is
 // re-sculpted in one batch at the scale s of the first sculpting (LoopReplay::kBatch), or one by
-// one from scratch (kIncremental), and either way δO is an oriented 2-manifold.
+// one from scratch (kIncremental), and either way δO is an oriented 2-manifold; the final batch
+// of `merge` is the same surface with or without the keyframe-by-keyframe sculpting before it.
 
 #include <gtest/gtest.h>
 
@@ -165,6 +166,43 @@ TEST(PipelineReplay, AReplayFollowsAMapThatWasRescaled) {
   EXPECT_GT(as_it_was, 1000u);
   EXPECT_EQ(added(larger, rescaled, true), as_it_was);
   EXPECT_LT(added(larger, first.scale(), false), as_it_was / 2);
+}
+
+// `merge`'s final batch without the keyframe-by-keyframe sculpting before it: the s the stream's
+// sculptor measures (by the keyframe spacing, or by the points' reach when r = 2 s), the same
+// surface, and nothing when the keyframes fit in the first batch (nor after the stream).
+TEST(PipelineFinalBatch, TheBatchAloneIsTheBatchAfterTheStream) {
+  const std::vector<SurfaceKeyframe> drive = testing::NoisyStreet(30, 120, 0.02, 11);
+  for (const double ray_length_factor : {15.0, 2.0}) {
+    SculptorOptions options;
+    options.init_keyframes = 10;
+    options.max_ray_length_factor = ray_length_factor;
+    IncrementalSculptor streamed(options);
+    std::vector<KeyframeStats> stats;
+    for (const SurfaceKeyframe& keyframe : drive)
+      for (const KeyframeStats& row : streamed.AddKeyframe(keyframe)) stats.push_back(row);
+    for (const KeyframeStats& row : streamed.Finish()) stats.push_back(row);
+    EXPECT_EQ(MeasureScale(options, drive), streamed.scale()) << ray_length_factor;
+    if (ray_length_factor == 2.0) {
+      EXPECT_GT(streamed.scale(), 1.5);  // the reach, not the 1 m keyframe spacing
+    }
+
+    const FinalBatch after = SculptFinalBatch(options, streamed, stats, drive);
+    const FinalBatch alone = SculptBatchOnly(options, drive);
+    ASSERT_TRUE(after.sculptor && alone.sculptor);
+    EXPECT_EQ(alone.sculptor->scale(), after.sculptor->scale());
+    std::vector<PointId> after_points, alone_points;
+    const TriangleMesh after_mesh = after.sculptor->ExtractObservedMesh(&after_points);
+    const TriangleMesh alone_mesh = alone.sculptor->ExtractObservedMesh(&alone_points);
+    EXPECT_GT(after_mesh.triangles.size(), 100u);
+    EXPECT_EQ(alone_mesh.triangles, after_mesh.triangles);
+    EXPECT_EQ(alone_mesh.vertices, after_mesh.vertices);
+    EXPECT_EQ(alone_points, after_points);
+    EXPECT_EQ(alone.stats.size(), after.stats.size());
+
+    options.init_keyframes = 30;
+    EXPECT_FALSE(SculptBatchOnly(options, drive).sculptor);
+  }
 }
 
 }  // namespace

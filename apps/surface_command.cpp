@@ -282,20 +282,36 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
     WritePlyMesh(surfaces.closed, out / "snapshots" / ("surface_" + keyframe + ".ply"));
     WritePlyMesh(surfaces.observed, out / "snapshots" / ("observed_" + keyframe + ".ply"));
   };
-  for (size_t i = 0; i < stream.size(); ++i) {
-    snapshot(sculptor.AddKeyframe(stream[i]));
-    if (!global.quiet && (i + 1) % 50 == 0) {
-      spdlog::info("surface: keyframe {}/{}", i + 1, stream.size());
+  // --final-batch: every keyframe sculpted again in one batch; its surface is the one written.
+  // On a COLMAP model without snapshots the batch alone (SculptBatchOnly, as `merge`): the
+  // keyframe-by-keyframe sculpting would give only its rows of stats/keyframes.csv. With
+  // --from-gt it runs first (SculptFinalBatch): its times per keyframe are the measure.
+  FinalBatch batch = o.final_batch && !o.colmap.empty() && o.snapshot_every == 0
+                         ? SculptBatchOnly(o.sculptor, stream)
+                         : FinalBatch{};
+  const bool batch_only = batch.sculptor != nullptr;
+  if (batch_only) {
+    stats = batch.stats;
+  } else {
+    for (size_t i = 0; i < stream.size(); ++i) {
+      snapshot(sculptor.AddKeyframe(stream[i]));
+      if (!global.quiet && (i + 1) % 50 == 0) {
+        spdlog::info("surface: keyframe {}/{}", i + 1, stream.size());
+      }
     }
+    snapshot(sculptor.Finish());
+    if (o.final_batch) batch = SculptFinalBatch(o.sculptor, sculptor, stats, stream);
   }
-  snapshot(sculptor.Finish());
-  // --final-batch: every keyframe sculpted again in one batch (SculptFinalBatch); its surface is
-  // the one written.
-  const FinalBatch batch =
-      o.final_batch ? SculptFinalBatch(o.sculptor, sculptor, stats, stream) : FinalBatch{};
   const IncrementalSculptor& written = batch.sculptor ? *batch.sculptor : sculptor;
   // The counts of the points of the surface written: the batch's, or the stream's.
   const std::vector<KeyframeStats>& written_stats = batch.sculptor ? batch.stats : stats;
+  // s, and the keyframe spacing it was measured from.
+  const double scale = batch_only ? written.scale() : sculptor.scale();
+  const double spacing =
+      batch_only
+          ? MeanKeyframeSpacing(stream, std::min(stream.size(), static_cast<size_t>(std::max(
+                                                                    1, o.sculptor.init_keyframes))))
+          : sculptor.keyframe_spacing();
 
   std::filesystem::create_directories(out / "stats");
   // The closed δO and its observed part, each vertex coloured as its point.
@@ -341,8 +357,8 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       "surface: s = %.3f (keyframe spacing %.3f), r = %.2f, ground bound %.2f; points filtered "
       "(paper §5.1): %zu invalid, %zu below the ground, %zu too far, %zu narrow aperture (%zu "
       "of their rays carve short of them)\n",
-      sculptor.scale(), sculptor.keyframe_spacing(), written.ray_length_bound(),
-      written.ground_bound(), filtered[0], filtered[1], filtered[2], filtered[3], uncertain_rays);
+      scale, spacing, written.ray_length_bound(), written.ground_bound(), filtered[0], filtered[1],
+      filtered[2], filtered[3], uncertain_rays);
   if (batch.sculptor) {
     std::printf(
         "surface: the final batch of all %zu keyframes at that s: %.2f s (the surface "
@@ -360,7 +376,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       "  observed: %zu triangles in %ld boundary loops, manifold with boundary %s; left out: "
       "%zu with a Steiner vertex, %zu long, %zu sparse, %zu unseen, %zu around touching "
       "boundaries, %zu in small components; %zu long ones grown back\n"
-      "  ms per incremental keyframe: median %.1f, p95 %.1f, max %.1f; max |E| %zu; smoothing "
+      "  ms per incremental keyframe%s: median %.1f, p95 %.1f, max %.1f; max |E| %zu; smoothing "
       "when the surface was taken: %.1f ms (%zu vertices)\n"
       "  wrote %s, %s and %s\n",
       stream.size(), added, rejected, 100.0 * rejected / std::max<size_t>(1, added + rejected),
@@ -368,7 +384,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       report.boundary_loops, report.ok ? "yes" : "NO", observed_stats.steiner,
       observed_stats.long_edges, observed_stats.sparse, observed_stats.unseen,
       observed_stats.manifold_repair, observed_stats.small_components, observed_stats.grown,
-      Quantile(ms, 0.5), Quantile(ms, 0.95),
+      batch_only ? " (none: the batch alone)" : "", Quantile(ms, 0.5), Quantile(ms, 0.95),
       ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end()), max_e, 1e3 * smoothing.seconds,
       smoothing.vertices, (out / "surface.ply").c_str(), (out / "surface_closed.ply").c_str(),
       (out / "stats" / "keyframes.csv").c_str());
@@ -390,8 +406,8 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
       {"boundary_loops", report.boundary_loops},
       {"closed_triangles", closed.triangles.size()},
       {"closed_manifold", closed_report.ok},
-      {"ms_median", Quantile(ms, 0.5)},
-      {"ms_p95", Quantile(ms, 0.95)},
+      {"ms_median", ms.empty() ? nlohmann::json() : nlohmann::json(Quantile(ms, 0.5))},
+      {"ms_p95", ms.empty() ? nlohmann::json() : nlohmann::json(Quantile(ms, 0.95))},
       {"smoothing",
        {{"every_keyframe", o.sculptor.smoothing.every_keyframe},
         {"at_extraction_runs", smoothing.runs},

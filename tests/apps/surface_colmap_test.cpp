@@ -184,10 +184,12 @@ TEST(ColmapKeyframes, SurfaceCommandSculptsAClosedManifoldFromAModel) {
     EXPECT_TRUE(color[2] == 77 || color == Rgb8(128, 128, 128));
   }
   // An SfM's points are sculpted as reconstruct sculpts its own: the surface written is a final
-  // batch, with the rays of the points the aperture bound drops; --no-final-batch and a zero
-  // margin give the keyframe-by-keyframe surface of the paper.
+  // batch (sculpted alone: no keyframe-by-keyframe times), with the rays of the points the
+  // aperture bound drops; --no-final-batch and a zero margin give the keyframe-by-keyframe
+  // surface of the paper.
   const nlohmann::json summary = nlohmann::json::parse(std::ifstream(out / "surface.json"));
   EXPECT_TRUE(summary["final_batch"]["ran"].get<bool>()) << summary.dump(2);
+  EXPECT_TRUE(summary["ms_median"].is_null()) << summary.dump(2);
   EXPECT_GT(summary["uncertain_rays"].get<size_t>(), 0u) << summary.dump(2);
   const fs::path paper = dir / "paper";
   const std::string paper_command =
@@ -198,6 +200,7 @@ TEST(ColmapKeyframes, SurfaceCommandSculptsAClosedManifoldFromAModel) {
   ASSERT_EQ(std::system(paper_command.c_str()), 0);
   const nlohmann::json paper_summary = nlohmann::json::parse(std::ifstream(paper / "surface.json"));
   EXPECT_FALSE(paper_summary["final_batch"]["ran"].get<bool>());
+  EXPECT_TRUE(paper_summary["ms_median"].is_number());
   EXPECT_EQ(paper_summary["uncertain_rays"].get<size_t>(), 0u);
   EXPECT_EQ(paper_summary["points_filtered_aperture"], summary["points_filtered_aperture"]);
   EXPECT_TRUE(CheckMesh(ReadPlyMesh(paper / "surface_closed.ply")).ok);

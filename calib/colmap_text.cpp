@@ -80,6 +80,13 @@ class LineReader {
   uint32_t Id(size_t index, const char* name) const {
     return static_cast<uint32_t>(Integer(index, name, 0, kMaxColmapId));
   }
+  // X Y Z R G B from `index` on (points3D.txt, frame_rays.txt).
+  void PointAndColour(size_t index, Eigen::Vector3d* xyz, Rgb8* color) const {
+    *xyz = Eigen::Vector3d(Number(index, "X"), Number(index + 1, "Y"), Number(index + 2, "Z"));
+    *color = Rgb8(static_cast<uint8_t>(Integer(index + 3, "R", 0, 255)),
+                  static_cast<uint8_t>(Integer(index + 4, "G", 0, 255)),
+                  static_cast<uint8_t>(Integer(index + 5, "B", 0, 255)));
+  }
 
  private:
   const std::filesystem::path& path_;
@@ -168,10 +175,7 @@ ColmapModel ParseColmapModel(const ColmapTextModel& text, const std::filesystem:
     ColmapPoint3D point;
     point.id = in.Id(0, "POINT3D_ID");
     if (!point_ids.insert(point.id).second) in.Fail("repeated POINT3D_ID " + in.Token(0));
-    point.xyz = Eigen::Vector3d(in.Number(1, "X"), in.Number(2, "Y"), in.Number(3, "Z"));
-    point.color = Rgb8(static_cast<uint8_t>(in.Integer(4, "R", 0, 255)),
-                       static_cast<uint8_t>(in.Integer(5, "G", 0, 255)),
-                       static_cast<uint8_t>(in.Integer(6, "B", 0, 255)));
+    in.PointAndColour(1, &point.xyz, &point.color);
     point.error = in.Number(7, "ERROR");
     for (size_t k = 8; k < line.tokens.size(); k += 2) {
       ColmapTrackElement element;
@@ -195,10 +199,7 @@ ColmapModel ParseColmapModel(const ColmapTextModel& text, const std::filesystem:
     point.point3d_id = in.Id(0, "POINT3D_ID");
     if (point.point3d_id != 0 && point_ids.count(point.point3d_id) == 0)
       in.Fail("POINT3D_ID " + in.Token(0) + " is not in " + points_path.filename().string());
-    point.xyz = Eigen::Vector3d(in.Number(1, "X"), in.Number(2, "Y"), in.Number(3, "Z"));
-    point.color = Rgb8(static_cast<uint8_t>(in.Integer(4, "R", 0, 255)),
-                       static_cast<uint8_t>(in.Integer(5, "G", 0, 255)),
-                       static_cast<uint8_t>(in.Integer(6, "B", 0, 255)));
+    in.PointAndColour(1, &point.xyz, &point.color);
     const size_t num_rays = static_cast<size_t>(in.Integer(7, "NUM_RAYS", 1, kMaxColmapId));
     if (line.tokens.size() != 8 + 4 * num_rays)
       in.Fail("NUM_RAYS is " + in.Token(7) + " but the line holds " +

@@ -145,6 +145,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
     cloud.colors.push_back(point.color);
   }
   const size_t map_points = cloud.points.size();
+  const size_t frame_points = FramePoints(merged.model);
   for (const ColmapFrameRayPoint& line : merged.model.frame_rays) {
     if (line.point3d_id != 0) continue;
     cloud.points.push_back(line.xyz);
@@ -163,7 +164,6 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   std::unordered_map<PointId, Rgb8> point_colors;
   Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
   const std::vector<SurfaceKeyframe> stream = ColmapKeyframes(merged.model, &point_colors, &up);
-  const size_t frame_points = FramePoints(merged.model);
   std::vector<ColmapFrameRayPoint>().swap(merged.model.frame_rays);  // in the stream now
   o.sculptor.up = up;
   // With the final batch (the default) only that batch is sculpted: the keyframe-by-keyframe
@@ -320,7 +320,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
       static_cast<size_t>(std::count_if(merged.overlaps.begin(), merged.overlaps.end(),
                                         [](const MergeOverlap& x) { return x.verified; })),
       merged.model.images.size(), merged.shared_images, map_points, merged.fused_points,
-      merged.input_points, cloud.points.size() - map_points, stream.size(), mesh.triangles.size(),
+      merged.input_points, frame_points, stream.size(), mesh.triangles.size(),
       closed.triangles.size(), manifold.ok ? "yes" : "NO", closed_manifold.ok ? "yes" : "NO",
       SecondsSince(start), out.c_str());
   if (!failure.empty()) {

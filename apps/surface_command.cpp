@@ -307,11 +307,7 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   const std::vector<KeyframeStats>& written_stats = batch.sculptor ? batch.stats : stats;
   // s, and the keyframe spacing it was measured from.
   const double scale = batch_only ? written.scale() : sculptor.scale();
-  const double spacing =
-      batch_only
-          ? MeanKeyframeSpacing(stream, std::min(stream.size(), static_cast<size_t>(std::max(
-                                                                    1, o.sculptor.init_keyframes))))
-          : sculptor.keyframe_spacing();
+  const double spacing = batch_only ? batch.keyframe_spacing : sculptor.keyframe_spacing();
 
   std::filesystem::create_directories(out / "stats");
   // The closed δO and its observed part, each vertex coloured as its point.

@@ -566,20 +566,13 @@ void MergeFrameRays(const std::vector<MergeSegment>& segments,
                     MergeResult* result) {
   const int count = static_cast<int>(segments.size());
   for (const MergedDrive& drive : result->drives) {
-    // Frame -> (centrality, owning segment), as the drive's poses were chosen.
-    std::map<size_t, std::pair<long, int>> owner;
-    for (int s = 0; s < count; ++s) {
-      if (!result->merged[s] || segments[s].drive != drive.folder) continue;
-      for (const auto& entry : segments[s].frame_poses) {
-        const long centrality = Centrality(segments[s], entry.first);
-        const auto it = owner.find(entry.first);
-        if (it == owner.end() || it->second.first < centrality)
-          owner[entry.first] = {centrality, s};
-      }
-    }
+    // Frame -> its merged pose and the segment that pose comes from.
     std::map<size_t, Rigid3d> merged_pose;
-    for (size_t f = 0; f < drive.frames.size(); ++f)
+    std::map<size_t, int> owner;
+    for (size_t f = 0; f < drive.frames.size(); ++f) {
       merged_pose[drive.frame_frames[f]] = drive.frames[f].world_from_rig;
+      owner[drive.frame_frames[f]] = drive.frame_segments[f];
+    }
     for (int s = 0; s < count; ++s) {
       const MergeSegment& segment = segments[s];
       if (!result->merged[s] || segment.drive != drive.folder) continue;
@@ -595,7 +588,7 @@ void MergeFrameRays(const std::vector<MergeSegment>& segments,
       };
       const auto owned = [&](size_t frame) {
         const auto it = owner.find(frame);
-        return it != owner.end() && it->second.second == s;
+        return it != owner.end() && it->second == s;
       };
       for (const ColmapFrameRayPoint& line : segment.model.frame_rays) {
         ColmapFrameRayPoint merged;
@@ -1026,26 +1019,34 @@ MergeResult MergeSegments(const std::vector<MergeSegment>& segments, const Merge
     merged.folder = drive;
     merged.label = label_of[drive];
     const auto collect = [&](std::map<size_t, StampedPose> MergeSegment::*poses,
-                             std::vector<StampedPose>* out, std::vector<size_t>* frames) {
-      std::map<size_t, std::pair<long, StampedPose>> best;
+                             std::vector<StampedPose>* out, std::vector<size_t>* frames,
+                             std::vector<int>* owners) {
+      struct Best {
+        long centrality;
+        int segment;
+        StampedPose pose;
+      };
+      std::map<size_t, Best> best;
       for (int s = 0; s < count; ++s) {
         if (!result.merged[s] || segments[s].drive != drive) continue;
         for (const auto& [frame, pose] : segments[s].*poses) {
           const long centrality = Centrality(segments[s], frame);
           const auto it = best.find(frame);
-          if (it != best.end() && it->second.first >= centrality) continue;
+          if (it != best.end() && it->second.centrality >= centrality) continue;
           StampedPose city = pose;
           city.world_from_rig = TransformPose(result.city_from_segment[s], pose.world_from_rig);
-          best[frame] = {centrality, city};
+          best[frame] = {centrality, s, city};
         }
       }
       for (const auto& [frame, entry] : best) {
-        out->push_back(entry.second);
+        out->push_back(entry.pose);
         frames->push_back(frame);
+        if (owners) owners->push_back(entry.segment);
       }
     };
-    collect(&MergeSegment::keyframe_poses, &merged.keyframes, &merged.keyframe_frames);
-    collect(&MergeSegment::frame_poses, &merged.frames, &merged.frame_frames);
+    collect(&MergeSegment::keyframe_poses, &merged.keyframes, &merged.keyframe_frames, nullptr);
+    collect(&MergeSegment::frame_poses, &merged.frames, &merged.frame_frames,
+            &merged.frame_segments);
     result.drives.push_back(std::move(merged));
   }
 

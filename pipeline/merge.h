@@ -123,6 +123,7 @@ struct MergedDrive {
   std::string label, folder;
   std::vector<StampedPose> keyframes, frames;  // world_from_rig of the merged map, in time order
   std::vector<size_t> keyframe_frames, frame_frames;  // their frame indices
+  std::vector<int> frame_segments;  // the segment each frame's pose comes from (most central)
 };
 
 struct MergeResult {

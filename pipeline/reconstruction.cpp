@@ -115,7 +115,9 @@ FinalBatch SculptFinalBatch(const SculptorOptions& base, const IncrementalSculpt
   const bool incremental = std::any_of(streamed_stats.begin(), streamed_stats.end(),
                                        [](const KeyframeStats& st) { return !st.batch; });
   if (!(streamed.scale() > 0.0) || !incremental) return {};
-  return SculptOneBatch(base, streamed.scale(), keyframes);
+  FinalBatch batch = SculptOneBatch(base, streamed.scale(), keyframes);
+  batch.keyframe_spacing = streamed.keyframe_spacing();
+  return batch;
 }
 
 FinalBatch SculptBatchOnly(const SculptorOptions& base,
@@ -123,9 +125,12 @@ FinalBatch SculptBatchOnly(const SculptorOptions& base,
   // The keyframe-by-keyframe sculpting sculpts one by one what comes after its first batch.
   const bool incremental = !base.batch_init || (base.scale > 0.0 && !base.batch_with_known_scale) ||
                            keyframes.size() > static_cast<size_t>(base.init_keyframes);
-  const double scale = MeasureScale(base, keyframes);
+  double spacing = 0.0;
+  const double scale = MeasureScale(base, keyframes, &spacing);
   if (!(scale > 0.0) || !incremental) return {};
-  return SculptOneBatch(base, scale, keyframes);
+  FinalBatch batch = SculptOneBatch(base, scale, keyframes);
+  batch.keyframe_spacing = spacing;
+  return batch;
 }
 
 namespace {

@@ -157,6 +157,7 @@ struct FinalBatch {
   std::unique_ptr<IncrementalSculptor> sculptor;
   std::vector<KeyframeStats> stats;  // the batch's rows
   double seconds = 0.0;
+  double keyframe_spacing = 0.0;  // of the keyframes s was measured on
 };
 FinalBatch SculptFinalBatch(const SculptorOptions& base, const IncrementalSculptor& streamed,
                             const std::vector<KeyframeStats>& streamed_stats,

@@ -271,7 +271,11 @@ double ScaleOfFirstKeyframes(const SculptorOptions& options,
 
 }  // namespace
 
-double MeasureScale(const SculptorOptions& options, const std::vector<SurfaceKeyframe>& keyframes) {
+double MeasureScale(const SculptorOptions& options, const std::vector<SurfaceKeyframe>& keyframes,
+                    double* spacing) {
+  double measured_spacing = 0.0, reach = 0.0;
+  if (!spacing) spacing = &measured_spacing;
+  *spacing = 0.0;
   if (options.scale != 0.0) return options.scale;
   // As IncrementalSculptor: the keyframes in groups of init_keyframes until a group moves.
   const size_t group = static_cast<size_t>(std::max(1, options.init_keyframes));
@@ -279,8 +283,7 @@ double MeasureScale(const SculptorOptions& options, const std::vector<SurfaceKey
     const std::vector<SurfaceKeyframe> first(
         keyframes.begin() + static_cast<long>(begin),
         keyframes.begin() + static_cast<long>(std::min(keyframes.size(), begin + group)));
-    double spacing = 0.0, reach = 0.0;
-    const double s = ScaleOfFirstKeyframes(options, first, &spacing, &reach);
+    const double s = ScaleOfFirstKeyframes(options, first, spacing, &reach);
     if (s > 0.0) return s;
   }
   return 0.0;

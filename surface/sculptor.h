@@ -339,8 +339,10 @@ double MeanKeyframeSpacing(const std::vector<SurfaceKeyframe>& keyframes, size_t
 
 // The s that an IncrementalSculptor with these options measures on `keyframes` as its stream
 // (SculptorOptions::scale: on the first init_keyframes, or the next ones when those do not move;
-// options.scale when given); 0 when none moves.
-double MeasureScale(const SculptorOptions& options, const std::vector<SurfaceKeyframe>& keyframes);
+// options.scale when given); 0 when none moves. *spacing, when given: the mean keyframe spacing of
+// the keyframes it was measured on (IncrementalSculptor::keyframe_spacing; 0 with options.scale).
+double MeasureScale(const SculptorOptions& options, const std::vector<SurfaceKeyframe>& keyframes,
+                    double* spacing = nullptr);
 
 // The surface time per keyframe of a step: its ms_total over its keyframes (amortised when
 // SculptorOptions::keyframes_per_step sculpts several at once).

@@ -191,6 +191,8 @@ TEST(PipelineFinalBatch, TheBatchAloneIsTheBatchAfterTheStream) {
     const FinalBatch alone = SculptBatchOnly(options, drive);
     ASSERT_TRUE(after.sculptor && alone.sculptor);
     EXPECT_EQ(alone.sculptor->scale(), after.sculptor->scale());
+    EXPECT_EQ(alone.keyframe_spacing, streamed.keyframe_spacing());
+    EXPECT_EQ(after.keyframe_spacing, streamed.keyframe_spacing());
     std::vector<PointId> after_points, alone_points;
     const TriangleMesh after_mesh = after.sculptor->ExtractObservedMesh(&after_points);
     const TriangleMesh alone_mesh = alone.sculptor->ExtractObservedMesh(&alone_points);

@@ -60,6 +60,13 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "corners of each image; the frame keeps those that continue a track, then the "
                    "strongest others, up to --corners (1: none; default 0: 2)")
       ->capture_default_str();
+  command
+      ->add_option("--epipolar-min-depth", o->sfm.tracks.epipolar_min_depth,
+                   "Corners the image-motion model leaves unmatched are searched again along "
+                   "their epipolar segment, given the predicted motion, down to this many times "
+                   "the camera's step between frames: near structure (parked cars, poles) gets "
+                   "tracked (0: off)")
+      ->capture_default_str();
   command->add_flag(
       "--no-frame-points{false}", o->sfm.tracker.frame_points,
       "No frame points: the tracks that end between two keyframes give the surface nothing "
@@ -188,6 +195,9 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
     o->sfm.tracks.continuation_pool = o->continuation_pool;
     o->sfm.continuation_pool_in_central_mode = true;
   }
+  if (!(o->sfm.tracks.epipolar_min_depth >= 0.0) ||
+      !std::isfinite(o->sfm.tracks.epipolar_min_depth))
+    throw InputError("", "--epipolar-min-depth", "expected 0 (off) or a positive number of steps");
   const SfmProfile profile = SfmProfileNamed(o->profile);
   o->sfm.tracks.harris.max_corners =
       o->corners > 0 ? o->corners : CornersPerImage(rig.NumCameras(), profile.corner_budget_factor);

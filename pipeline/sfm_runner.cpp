@@ -85,8 +85,8 @@ std::string SfmRunnerOptions::Check() const {
 }
 
 std::string SfmFramesCsvHeader() {
-  return "frame,name,loaded,corners,matched,predicted,relocalising,tracked,keyframe,inliers,ms,"
-         "status";
+  return "frame,name,loaded,corners,matched,predicted,epipolar,relocalising,tracked,keyframe,"
+         "inliers,ms,status";
 }
 
 std::string SfmFramesCsvRow(const SfmFrameRow& row) {
@@ -95,8 +95,9 @@ std::string SfmFramesCsvRow(const SfmFrameRow& row) {
     if (c == ',' || c == '\n') c = ';';
   std::ostringstream o;
   o << row.frame << ',' << row.name << ',' << row.loaded << ',' << row.corners << ',' << row.matched
-    << ',' << row.predicted << ',' << row.relocalising << ',' << row.result.tracked << ','
-    << row.result.keyframe << ',' << row.result.inliers << ',' << row.ms << ',' << status;
+    << ',' << row.predicted << ',' << row.epipolar << ',' << row.relocalising << ','
+    << row.result.tracked << ',' << row.result.keyframe << ',' << row.result.inliers << ','
+    << row.ms << ',' << status;
   return o.str();
 }
 
@@ -331,13 +332,15 @@ const SfmFrameRow& SfmRunner::AddFrame(PrefetchedFrame frame, const std::string&
     }
   } else {
     row.loaded = true;
+    const PixelPredictor predict = ReprojectionPredictor(s.tracker, s.rig);
+    const std::optional<RigMotion> motion = PredictedMotion(s.tracker);
     TrackedFrame tracked =
-        frame.corners ? s.builder.AddDetectedFrame(std::move(*frame.corners),
-                                                   ReprojectionPredictor(s.tracker, s.rig))
-                      : s.builder.AddFrame(frame.images, ReprojectionPredictor(s.tracker, s.rig));
+        frame.corners ? s.builder.AddDetectedFrame(std::move(*frame.corners), predict, motion)
+                      : s.builder.AddFrame(frame.images, predict, motion);
     row.corners = tracked.num_corners;
     row.matched = tracked.num_matched;
     row.predicted = tracked.num_predicted;
+    row.epipolar = tracked.num_epipolar;
     row.relocalising = tracked.relocalising;
     s.input_frames.push_back(row.frame);
     Tracker& tracker = s.tracker;

@@ -111,6 +111,7 @@ struct SfmFrameRow {
   std::string name;
   bool loaded = false;  // false: an image could not be read, the frame was skipped
   int corners = 0, matched = 0, predicted = 0;
+  int epipolar = 0;           // of matched: found along their epipolar segment
   bool relocalising = false;  // matched against the last keyframe after a lost frame
   FrameResult result;
   double ms = 0.0;  // waiting for the images, tracking and, for a keyframe, the local

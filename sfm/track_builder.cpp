@@ -47,6 +47,53 @@ PixelPredictor ReprojectionPredictor(const Tracker& tracker, const Rig& rig) {
   };
 }
 
+std::optional<RigMotion> PredictedMotion(const Tracker& tracker) {
+  RigMotion motion;
+  if (!tracker.PredictMotion(&motion.previous_world_from_rig, &motion.world_from_rig,
+                             &motion.rotation_error))
+    return std::nullopt;
+  return motion;
+}
+
+bool EpipolarSearchRegion(const Camera& camera, const RigMotion& motion,
+                          const Eigen::Vector2d& pixel, double min_depth, double radius,
+                          double downscale, SearchRegion* region) {
+  Eigen::Vector3d bearing;
+  if (!camera.Unproject(pixel, &bearing)) return false;
+  // The new camera from the camera of the frame before.
+  const Rigid3d new_from_previous = camera.cam_from_rig * motion.world_from_rig.Inverse() *
+                                    motion.previous_world_from_rig * camera.cam_from_rig.Inverse();
+  const double step = new_from_previous.translation.norm();
+  Eigen::Vector2d far, near, middle;
+  if (!camera.Project(new_from_previous.rotation * bearing, &far)) return false;
+  // The near end: the corner's ray at `depth`; brought farther (up to 2^6 times) while it cannot
+  // be imaged or the curve between the ends (the projection at twice that depth, halfway in
+  // inverse depth) leaves the band around the segment.
+  double depth = min_depth * step;
+  constexpr int kTries = 7;
+  int tries = 0;
+  for (; tries < kTries; ++tries, depth *= 2.0) {
+    if (!(depth > 0.0)) {
+      near = far;
+      break;
+    }
+    if (!camera.Project(new_from_previous * (depth * bearing), &near) ||
+        !camera.Project(new_from_previous * (2.0 * depth * bearing), &middle))
+      continue;
+    const Eigen::Vector2d chord = near - far;
+    const double length_squared = chord.squaredNorm();
+    const double at = length_squared > 0.0
+                          ? std::clamp((middle - far).dot(chord) / length_squared, 0.0, 1.0)
+                          : 0.0;
+    if ((middle - far - at * chord).norm() <= 0.5 * radius * downscale) break;
+  }
+  if (tries == kTries) return false;
+  region->center = InputToPreparedPixel(far, downscale);
+  region->along = InputToPreparedPixel(near, downscale) - region->center;
+  region->radius = radius;
+  return true;
+}
+
 TrackBuilder::TrackBuilder(const Rig& rig, const TrackBuilderOptions& options)
     : rig_(rig),
       options_(CheckedOptions(options, "TrackBuilderOptions")),
@@ -95,7 +142,8 @@ FrameCorners DetectFrameCorners(const std::vector<cv::Mat>& images, const Harris
 }
 
 TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
-                                    const PixelPredictor& predict) {
+                                    const PixelPredictor& predict,
+                                    const std::optional<RigMotion>& motion) {
   if (images.size() != rig_.NumCameras()) {
     throw std::invalid_argument("TrackBuilder::AddFrame: " + std::to_string(images.size()) +
                                 " images for a rig of " + std::to_string(rig_.NumCameras()) +
@@ -104,10 +152,11 @@ TrackedFrame TrackBuilder::AddFrame(const std::vector<cv::Mat>& images,
   FrameCorners detected =
       DetectFrameCorners(images, FrontEndHarrisOptions(options_), options_.zncc.half_window);
   timings_.detect += detected.seconds;
-  return AddCorners(std::move(detected), predict);
+  return AddCorners(std::move(detected), predict, motion);
 }
 
-TrackedFrame TrackBuilder::AddDetectedFrame(FrameCorners detected, const PixelPredictor& predict) {
+TrackedFrame TrackBuilder::AddDetectedFrame(FrameCorners detected, const PixelPredictor& predict,
+                                            const std::optional<RigMotion>& motion) {
   if (detected.prepared.size() != rig_.NumCameras() ||
       detected.corners.size() != rig_.NumCameras()) {
     throw std::invalid_argument(
@@ -119,10 +168,11 @@ TrackedFrame TrackBuilder::AddDetectedFrame(FrameCorners detected, const PixelPr
                                 std::to_string(detected.windows.size()) + " cameras for a rig of " +
                                 std::to_string(rig_.NumCameras()) + " cameras");
   timings_.detect_ahead += detected.seconds;
-  return AddCorners(std::move(detected), predict);
+  return AddCorners(std::move(detected), predict, motion);
 }
 
-TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredictor& predict) {
+TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredictor& predict,
+                                      const std::optional<RigMotion>& motion) {
   const int num_cameras = static_cast<int>(rig_.NumCameras());
   TrackedFrame frame;
   frame.relocalising = lost_ && !keyframe_history_.empty();
@@ -152,8 +202,12 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
   // Search regions (the predictor reads the tracker: called here, not in the parallel part).
   std::vector<std::vector<SearchRegion>> regions(num_cameras);
   std::vector<int> num_predicted(num_cameras, 0);
+  // Per camera, the corners searched around their map point's reprojection: their depth is
+  // known, so they are not searched along the whole epipolar segment.
+  std::vector<std::vector<char>> reprojected(num_cameras);
   for (int c = 0; c < num_cameras; ++c) {
     const CameraState& source = sources[c];
+    reprojected[c].assign(source.corners.size(), 0);
     for (size_t i = 0; i < source.corners.size(); ++i) {
       Eigen::Vector2d pixel;
       if (frame.relocalising) {
@@ -161,20 +215,47 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
       } else if (predict && predict(c, source.tracks[i], &pixel)) {
         regions[c].push_back({InputToPreparedPixel(pixel, options_.harris.downscale),
                               options_.predicted_search_radius});
+        reprojected[c][i] = 1;
         ++num_predicted[c];
       } else {
         regions[c].push_back({source.corners[i] + source.flow, options_.search_radius});
       }
     }
   }
-  // Matching, in parallel over the cameras.
+  // Matching, in parallel over the cameras; then the corners left unmatched that have no map
+  // point along their epipolar segments, against the corners left unmatched.
+  const bool epipolar =
+      motion.has_value() && !frame.relocalising && options_.epipolar_min_depth > 0.0;
   std::vector<std::vector<ZnccMatch>> matches(num_cameras);
+  std::vector<int> num_epipolar(num_cameras, 0);
   tbb::parallel_for(0, num_cameras, [&](int c) {
     const CameraState& source = sources[c];
     if (source.corners.empty() || corners[c].empty()) return;
+    const CornerWindows* windows = detected.windows.empty() ? nullptr : &detected.windows[c];
     matches[c] = MatchZncc(source.prepared, source.corners, regions[c], prepared[c], corners[c],
-                           options_.zncc, pool_begin[c],
-                           detected.windows.empty() ? nullptr : &detected.windows[c]);
+                           options_.zncc, pool_begin[c], windows);
+    // The prediction's rotation error, in pixels of this camera's prepared image.
+    if (!epipolar || !(motion->rotation_error >= 0.0) ||
+        motion->rotation_error * rig_.cameras[c].fx() / options_.harris.downscale >
+            0.5 * options_.predicted_search_radius)
+      return;
+    std::vector<char> matched1(source.corners.size(), 0), matched2(corners[c].size(), 0);
+    for (const ZnccMatch& match : matches[c]) matched1[match.index1] = matched2[match.index2] = 1;
+    std::vector<SearchRegion> segments(source.corners.size(), {Eigen::Vector2d::Zero(), -1.0});
+    for (size_t i = 0; i < source.corners.size(); ++i) {
+      if (matched1[i] || reprojected[c][i]) continue;
+      if (!EpipolarSearchRegion(rig_.cameras[c], *motion,
+                                PreparedToInputPixel(source.corners[i], options_.harris.downscale),
+                                options_.epipolar_min_depth, options_.predicted_search_radius,
+                                options_.harris.downscale, &segments[i]))
+        segments[i].radius = -1.0;
+    }
+    for (const ZnccMatch& match : MatchZncc(source.prepared, source.corners, segments, prepared[c],
+                                            corners[c], options_.zncc, pool_begin[c], windows)) {
+      if (matched2[match.index2]) continue;  // taken by the first search
+      matches[c].push_back(match);
+      ++num_epipolar[c];
+    }
   });
 
   for (int c = 0; c < num_cameras; ++c) {
@@ -191,6 +272,7 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
     }
     frame.num_matched += static_cast<int>(matches[c].size());
     frame.num_predicted += num_predicted[c];
+    frame.num_epipolar += num_epipolar[c];
     CameraState& state = cameras_[c];
     if (!dx.empty() && !frame.relocalising) {
       std::nth_element(dx.begin(), dx.begin() + dx.size() / 2, dx.end());

@@ -5,7 +5,9 @@
 // into tracks; matched and new corners become bearings through the camera model. Works on any
 // rig (1 to N cameras); detection and matching run in parallel over the cameras (TBB).
 // Once the tracker predicts the pose (constant velocity), corners whose track has a map point
-// are searched in a small region around its reprojection (a PixelPredictor). After a frame the
+// are searched in a small region around its reprojection (a PixelPredictor), and the corners
+// still unmatched along their epipolar segment (a RigMotion): near structure moves far more
+// than the median flow. After a frame the
 // tracker could not track (a black frame, a jump), the next frames are matched against the
 // last keyframe's images in a wider region (re-localisation), so that tracks resume with the
 // keyframe's track ids. Once the tracker has resected the frame, it asks for its map points
@@ -22,6 +24,7 @@
 #include <Eigen/Core>
 #include <functional>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -63,9 +66,43 @@ struct TrackBuilderOptions {
   // frame, while the corners per image stay max_corners. 1: no pool (each frame's
   // max_corners strongest only).
   double continuation_pool = 2.0;
+  // The corners of the frame before that the image-motion model left unmatched (those of
+  // tracks without a map point: a map point's reprojection is searched around instead) are
+  // searched again along their epipolar segment in the new frame, when the rig's motion is
+  // predicted (AddFrame's `motion`): from where the corner would be at infinite depth to where it
+  // would be at epipolar_min_depth times the camera's predicted step, within
+  // predicted_search_radius of that segment. Near structure (a parked car beside the road, a pole,
+  // a kerb) moves many times the camera's median flow between two frames and is otherwise never
+  // tracked, so never mapped. 0: off.
+  double epipolar_min_depth = 1.5;
 
   std::string Check() const;
 };
+
+// The rig's motion from the frame before to the new frame, as the tracker predicts it: where a
+// corner of the frame before may lie in the new frame, whatever its depth.
+struct RigMotion {
+  Rigid3d previous_world_from_rig;  // the frame before (tracked)
+  Rigid3d world_from_rig;           // the new frame (predicted)
+  // How far the prediction's rotation may be off (radians): the model's error on the frame
+  // before; negative when unknown. A camera searches along epipolar segments only where this
+  // moves an image point by less than half the band's radius (in turns at a low frame rate
+  // the model is degrees off, and a band in the wrong place offers only look-alikes).
+  double rotation_error = -1.0;
+};
+
+// The tracker's constant-velocity motion (Tracker::PredictMotion); nullopt before the
+// initialisation or after a frame that was not tracked.
+std::optional<RigMotion> PredictedMotion(const Tracker& tracker);
+
+// Where a corner of the frame before (`pixel`, input-image pixels of `camera`) lies in the same
+// camera of the new frame at any depth from min_depth times the camera's step to infinity: a
+// segment of the prepared image (its two ends project points of the corner's ray; where the
+// lens bends the epipolar curve more than radius / 2 away from the segment, the near end is
+// brought farther), `radius` wide. False when the ray cannot be imaged there.
+bool EpipolarSearchRegion(const Camera& camera, const RigMotion& motion,
+                          const Eigen::Vector2d& pixel, double min_depth, double radius,
+                          double downscale, SearchRegion* region);
 
 // The Harris options of the front end's detection: options.harris with its pool
 // (continuation_pool). DetectFrameCorners for TrackBuilder::AddDetectedFrame takes these.
@@ -77,6 +114,7 @@ struct TrackedFrame {
   int num_corners = 0;
   int num_matched = 0;        // corners continuing a track of the previous frame (or keyframe)
   int num_predicted = 0;      // searched around a reprojection
+  int num_epipolar = 0;       // of num_matched, found along their epipolar segment
   bool relocalising = false;  // matched against the last keyframe
 };
 
@@ -115,11 +153,15 @@ class TrackBuilder {
   TrackBuilder(const Rig& rig, const TrackBuilderOptions& options);
 
   // images[c] is camera c's image of the frame (8-bit grey or colour, the size rig.json gives).
-  TrackedFrame AddFrame(const std::vector<cv::Mat>& images, const PixelPredictor& predict = {});
+  // motion: the rig's predicted motion since the frame before, for the epipolar search
+  // (TrackBuilderOptions::epipolar_min_depth).
+  TrackedFrame AddFrame(const std::vector<cv::Mat>& images, const PixelPredictor& predict = {},
+                        const std::optional<RigMotion>& motion = std::nullopt);
   // The same with the frame's corners detected beforehand (DetectFrameCorners with
   // FrontEndHarrisOptions(options)); the result is the same. Their detection time counts as
   // detect_ahead.
-  TrackedFrame AddDetectedFrame(FrameCorners detected, const PixelPredictor& predict = {});
+  TrackedFrame AddDetectedFrame(FrameCorners detected, const PixelPredictor& predict = {},
+                                const std::optional<RigMotion>& motion = std::nullopt);
   // What the tracker made of the frame just added: a keyframe becomes the reference of a later
   // re-localisation; after a frame not tracked, the next frames are matched against it.
   void SetFrameResult(bool tracked, bool keyframe);
@@ -161,7 +203,8 @@ class TrackBuilder {
     cv::Mat descriptors;  // of the corners, computed when first needed (Describe)
   };
   // AddFrame after the detection.
-  TrackedFrame AddCorners(FrameCorners detected, const PixelPredictor& predict);
+  TrackedFrame AddCorners(FrameCorners detected, const PixelPredictor& predict,
+                          const std::optional<RigMotion>& motion);
   // The descriptors of a camera state's corners (computed once; again after corners were
   // added by the map-point search).
   const cv::Mat& Describe(CameraState* state) const;

@@ -220,6 +220,9 @@ struct Tracker::Impl {
     Rigid3d world_from_rig;
   };
   std::vector<TrackedPose> last_tracked;  // at most two, oldest first
+  // The angle between the motion model's rotation for the last frame resected and the
+  // resection's (radians; −1: the frame had no prediction).
+  double prediction_rotation_error = -1.0;
   // The observations of the last tracked frame (after the map-point search), a reference of
   // the relative-pose fallback; its pose is last_tracked.back() when the frames agree.
   int last_frame = -1;
@@ -766,7 +769,9 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   // jump of the rig: rejected rather than put in the map.
   Rigid3d predicted;
   if (!last_tracked.empty()) {
-    Predict(num_frames - 1, &predicted);
+    if (Predict(num_frames - 1, &predicted))
+      prediction_rotation_error =
+          resection.world_from_rig.rotation.angularDistance(predicted.rotation);
     const double last_step = last_tracked.size() == 2
                                  ? (last_tracked[1].world_from_rig.translation -
                                     last_tracked[0].world_from_rig.translation)
@@ -1343,6 +1348,7 @@ FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations,
                               const MapPointSearchFn& search) {
   Impl& s = *impl_;
   ++s.num_frames;
+  s.prediction_rotation_error = -1.0;  // until the frame is resected against a prediction
   const int frame = s.num_frames - 1;
   // A new start when the first keyframe cannot be initialised from (see max_init_frames).
   // A stereo map of one keyframe is given up only when no frame has been tracked from it for as
@@ -1609,6 +1615,14 @@ bool Tracker::PredictPose(Rigid3d* world_from_rig) const {
   if (!impl_->initialised) return false;
   return impl_->Predict(impl_->num_frames, world_from_rig) &&
          impl_->last_tracked.back().frame == impl_->num_frames - 1;
+}
+
+bool Tracker::PredictMotion(Rigid3d* previous_world_from_rig, Rigid3d* predicted_world_from_rig,
+                            double* last_rotation_error) const {
+  if (!PredictPose(predicted_world_from_rig)) return false;
+  *previous_world_from_rig = impl_->last_tracked.back().world_from_rig;
+  if (last_rotation_error) *last_rotation_error = impl_->prediction_rotation_error;
+  return true;
 }
 
 bool Tracker::TrackPosition(int track, Eigen::Vector3d* position) const {

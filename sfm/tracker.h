@@ -330,6 +330,12 @@ class Tracker {
   // last two tracked frames applied once more); false before the initialisation or after a
   // frame that was not tracked (then the last tracked pose is given, with no velocity).
   bool PredictPose(Rigid3d* world_from_rig) const;
+  // The same, with the pose of the frame before (the last tracked frame) that the prediction
+  // continues: the motion of the rig from the frame before to the next one. last_rotation_error:
+  // how far the model's rotation was from the resected one on the frame before (radians; −1
+  // when that frame had no prediction), a measure of how far to trust this one.
+  bool PredictMotion(Rigid3d* previous_world_from_rig, Rigid3d* predicted_world_from_rig,
+                     double* last_rotation_error = nullptr) const;
   // The map point of a track, if it has one (world frame).
   bool TrackPosition(int track, Eigen::Vector3d* position) const;
   // Seconds spent in each stage since the start.

@@ -284,11 +284,22 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
   std::vector<int>& near = buffers.near;
   for (size_t i = 0; i < corners1.size(); ++i) {
     if (!windows1.valid[i]) continue;
-    const double radius_squared = regions[i].radius * regions[i].radius;
-    grid.Near(regions[i].center, regions[i].radius, &near);
+    const SearchRegion& region = regions[i];
+    const double radius_squared = region.radius * region.radius;
+    const double length_squared = region.along.squaredNorm();
+    if (length_squared > 0.0) {
+      grid.NearSegment(region.center, region.along, region.radius, &near);
+    } else {
+      grid.Near(region.center, region.radius, &near);
+    }
     for (const int j : near) {
       if (!valid2[j]) continue;
-      if ((corners2[j] - regions[i].center).squaredNorm() > radius_squared) continue;
+      Eigen::Vector2d offset = corners2[j] - region.center;
+      if (length_squared > 0.0) {
+        const double at = std::clamp(offset.dot(region.along) / length_squared, 0.0, 1.0);
+        offset -= at * region.along;
+      }
+      if (offset.squaredNorm() > radius_squared) continue;
       const double score = Dot(windows1[i], window2(j), area);
       if (score > score1[i]) {
         second1[i] = score1[i];

@@ -34,11 +34,13 @@ struct ZnccOptions {
   std::string Check() const;
 };
 
-// Where a corner of the first image is looked for in the second: a disc (pixels of the second
-// prepared image). A negative radius skips the corner.
+// Where a corner of the first image is looked for in the second (pixels of the second prepared
+// image): the points within `radius` of the segment from `center` to `center + along`, a disc
+// when `along` is zero (an epipolar band when it is not). A negative radius skips the corner.
 struct SearchRegion {
   Eigen::Vector2d center = Eigen::Vector2d::Zero();
   double radius = 20.0;
+  Eigen::Vector2d along = Eigen::Vector2d::Zero();
 };
 
 struct ZnccMatch {

@@ -63,6 +63,29 @@ class CornerCells {
     std::sort(out->begin(), out->end());
   }
 
+  // The same for the points within `radius` of the segment from `start` to `start + along`:
+  // the cells of its bounding box whose centre lies within radius plus half a cell's diagonal
+  // of the segment (a superset of the cells that meet the band).
+  void NearSegment(const Eigen::Vector2d& start, const Eigen::Vector2d& along, double radius,
+                   std::vector<int>* out) const {
+    out->clear();
+    const Eigen::Vector2d end = start + along;
+    const double reach = radius + 0.5 * std::sqrt(2.0) * cell_, reach_squared = reach * reach;
+    const double length_squared = along.squaredNorm();
+    for (int row = Row(std::min(start.y(), end.y()) - radius);
+         row <= Row(std::max(start.y(), end.y()) + radius); ++row)
+      for (int col = Col(std::min(start.x(), end.x()) - radius);
+           col <= Col(std::max(start.x(), end.x()) + radius); ++col) {
+        Eigen::Vector2d offset = Eigen::Vector2d((col + 0.5) * cell_, (row + 0.5) * cell_) - start;
+        if (length_squared > 0.0)
+          offset -= std::clamp(offset.dot(along) / length_squared, 0.0, 1.0) * along;
+        if (offset.squaredNorm() > reach_squared) continue;
+        const Range range = Cell(col, row);
+        out->insert(out->end(), range.begin(), range.end());
+      }
+    std::sort(out->begin(), out->end());
+  }
+
  private:
   double cell_;
   int cols_, rows_;

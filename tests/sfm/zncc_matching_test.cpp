@@ -82,10 +82,25 @@ TEST(ZnccMatching, SameMatchesAsBruteForce) {
   const std::vector<Eigen::Vector2d> corners2 = Pixels(DetectHarrisCorners(image2, harris));
   ASSERT_GT(corners1.size(), 150u);
   std::vector<SearchRegion> regions;
-  for (size_t i = 0; i < corners1.size(); ++i)  // various radii, some corners skipped
+  for (size_t i = 0; i < corners1.size(); ++i) {  // various radii, some corners skipped
     regions.push_back({corners1[i] + Eigen::Vector2d(3.0, -1.0), i % 7 == 0   ? -1.0
                                                                  : i % 3 == 0 ? 40.0
                                                                               : 12.0});
+    // Some bands along a segment (an epipolar search), of either direction.
+    if (i % 5 == 1) {
+      regions.back().radius = 4.0;
+      regions.back().along = Eigen::Vector2d(i % 2 ? 60.0 : -45.0, 20.0);
+      regions.back().center -= 0.5 * regions.back().along;
+    }
+  }
+  // Distance from a pixel to a region's segment.
+  auto distance = [](const SearchRegion& region, const Eigen::Vector2d& pixel) {
+    const double length_squared = region.along.squaredNorm();
+    double at = 0.0;
+    if (length_squared > 0.0)
+      at = std::clamp((pixel - region.center).dot(region.along) / length_squared, 0.0, 1.0);
+    return (pixel - region.center - at * region.along).norm();
+  };
   ZnccOptions options;
   options.subpixel = false;
   options.min_zncc = 0.5;
@@ -98,7 +113,7 @@ TEST(ZnccMatching, SameMatchesAsBruteForce) {
   for (size_t i = 0; i < corners1.size(); ++i) {
     if (regions[i].radius < 0.0) continue;
     for (size_t j = 0; j < corners2.size(); ++j) {
-      if ((corners2[j] - regions[i].center).norm() > regions[i].radius) continue;
+      if (distance(regions[i], corners2[j]) > regions[i].radius) continue;
       const double s = ReferenceZncc(image1, corners1[i], image2, corners2[j], 5);
       if (std::isnan(s)) continue;
       if (s > score1[i]) {

@@ -20,6 +20,15 @@ inline Rig TwoCameraRig() {
   return rig;
 }
 
+// One camera of 400x300 pixels (f = 200).
+inline Rig OneCameraRig() {
+  Rig rig = MakeSyntheticRingRig(1, false, 0.0);
+  rig.cameras[0].width = 400;
+  rig.cameras[0].height = 300;
+  rig.cameras[0].params = {200.0, 200.0, 199.5, 149.5};
+  return rig;
+}
+
 // Expects at least min_share of the true inliers kept and at most 1 − min_share of the true
 // outliers kept by a RANSAC inlier mask.
 inline void ExpectMaskMatchesTruth(const std::vector<char>& mask,

@@ -68,10 +68,7 @@ TEST(TrackBuilder, ChainsTracksAlongAShiftedSequence) {
 // frames as not tracked; the next frame is matched against the last keyframe's images in the
 // wider re-localisation region, so its corners take the keyframe's track ids again.
 TEST(TrackBuilder, RelocalisesAgainstTheLastKeyframeAfterBlackFrames) {
-  Rig rig = MakeSyntheticRingRig(1, false, 0.0);
-  rig.cameras[0].width = 400;
-  rig.cameras[0].height = 300;
-  rig.cameras[0].params = {200.0, 200.0, 199.5, 149.5};
+  const Rig rig = test::OneCameraRig();
   TrackBuilderOptions options;
   options.search_radius = 12.0;
   options.relocalisation_search_radius = 60.0;
@@ -110,10 +107,7 @@ TEST(TrackBuilder, RelocalisesAgainstTheLastKeyframeAfterBlackFrames) {
 // With a predictor, corners of tracks it knows are searched around the predicted pixel in the
 // small predicted radius: a motion far beyond search_radius is still followed.
 TEST(TrackBuilder, SearchesAroundPredictedPixels) {
-  Rig rig = MakeSyntheticRingRig(1, false, 0.0);
-  rig.cameras[0].width = 400;
-  rig.cameras[0].height = 300;
-  rig.cameras[0].params = {200.0, 200.0, 199.5, 149.5};
+  const Rig rig = test::OneCameraRig();
   TrackBuilderOptions options;
   options.search_radius = 8.0;
   options.predicted_search_radius = 4.0;
@@ -160,10 +154,7 @@ RigMotion CameraMoved(const Camera& camera, const Eigen::Vector3d& step) {
 // search_radius and with no flow yet. Given the motion, the corners are searched along their
 // epipolar segment and found; a shift across the epipolar lines is not followed.
 TEST(TrackBuilder, SearchesAlongTheEpipolarSegmentGivenTheMotion) {
-  Rig rig = MakeSyntheticRingRig(1, false, 0.0);
-  rig.cameras[0].width = 400;
-  rig.cameras[0].height = 300;
-  rig.cameras[0].params = {200.0, 200.0, 199.5, 149.5};
+  const Rig rig = test::OneCameraRig();
   TrackBuilderOptions options;
   options.search_radius = 8.0;
   options.predicted_search_radius = 4.0;

@@ -437,6 +437,9 @@ SfmRunResult SfmRunner::Finish() {
   result.corner_quality = front_end.harris.quality_level;
   result.min_tracked_share = s.options.tracker.keyframes.min_tracked_share;
   result.continuation_pool = front_end.continuation_pool;
+  result.epipolar_min_depth = front_end.epipolar_min_depth;
+  result.epipolar_matches = 0;
+  for (const SfmFrameRow& row : result.frames) result.epipolar_matches += row.epipolar;
   if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {
     const auto ba_start = Clock::now();
     int points_merged = 0;

@@ -539,6 +539,21 @@ TEST(SfmCommand, TheCarRigOnTheTinyDriveIsMetric) {
   EXPECT_EQ(summary.at("front_end").at("corners_per_image").get<int>(), 350);
   EXPECT_EQ(summary.at("front_end").at("corner_quality").get<double>(), 0.003);
   EXPECT_EQ(summary.at("front_end").at("continuation_pool").get<double>(), 2.0);
+  // Some corners (near structure, the first frames' large motions) are found only along their
+  // epipolar segments; the summary counts them as the frames' rows do.
+  EXPECT_EQ(summary.at("front_end").at("epipolar_min_depth").get<double>(), 1.5);
+  const long epipolar = summary.at("front_end").at("epipolar_matches").get<long>();
+  EXPECT_GT(epipolar, 0);
+  const std::vector<std::string> rows =
+      testing::SplitText(testing::ReadTextFile(dir.path() / "sfm" / "stats" / "sfm_frames.csv"));
+  ASSERT_GE(rows.size(), 2u);
+  const std::vector<std::string> header = testing::SplitText(rows[0], ',');
+  const size_t column = std::find(header.begin(), header.end(), "epipolar") - header.begin();
+  ASSERT_LT(column, header.size()) << rows[0];
+  long summed = 0;
+  for (size_t r = 1; r < rows.size(); ++r)
+    summed += std::stol(testing::SplitText(rows[r], ',')[column]);
+  EXPECT_EQ(summed, epipolar);
   // The resection's hypotheses from one camera's P3P, taken to the rig by that camera's offset:
   // the same.
   ExpectEveryFramePosedWithinOnePercent("sfm", drive, dir.path() / "sfm_camera_p3p", dir.path(),

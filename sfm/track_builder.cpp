@@ -5,12 +5,14 @@
 #include <algorithm>
 #include <cassert>
 #include <chrono>
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <unordered_set>
 
 #include "calib/error.h"
 #include "calib/rig_report.h"
+#include "sfm/internal/corner_cells.h"
 
 namespace omni {
 
@@ -80,12 +82,9 @@ bool EpipolarSearchRegion(const Camera& camera, const RigMotion& motion,
     if (!camera.Project(new_from_previous * (depth * bearing), &near) ||
         !camera.Project(new_from_previous * (2.0 * depth * bearing), &middle))
       continue;
-    const Eigen::Vector2d chord = near - far;
-    const double length_squared = chord.squaredNorm();
-    const double at = length_squared > 0.0
-                          ? std::clamp((middle - far).dot(chord) / length_squared, 0.0, 1.0)
-                          : 0.0;
-    if ((middle - far - at * chord).norm() <= 0.5 * radius * downscale) break;
+    if (std::sqrt(internal::SquaredDistanceToSegment(middle, far, near - far)) <=
+        0.5 * radius * downscale)
+      break;
   }
   if (tries == kTries) return false;
   region->center = InputToPreparedPixel(far, downscale);

@@ -286,20 +286,16 @@ std::vector<ZnccMatch> MatchZncc(const cv::Mat& image1,
     if (!windows1.valid[i]) continue;
     const SearchRegion& region = regions[i];
     const double radius_squared = region.radius * region.radius;
-    const double length_squared = region.along.squaredNorm();
-    if (length_squared > 0.0) {
+    if (region.along.squaredNorm() > 0.0) {
       grid.NearSegment(region.center, region.along, region.radius, &near);
     } else {
       grid.Near(region.center, region.radius, &near);
     }
     for (const int j : near) {
       if (!valid2[j]) continue;
-      Eigen::Vector2d offset = corners2[j] - region.center;
-      if (length_squared > 0.0) {
-        const double at = std::clamp(offset.dot(region.along) / length_squared, 0.0, 1.0);
-        offset -= at * region.along;
-      }
-      if (offset.squaredNorm() > radius_squared) continue;
+      if (internal::SquaredDistanceToSegment(corners2[j], region.center, region.along) >
+          radius_squared)
+        continue;
       const double score = Dot(windows1[i], window2(j), area);
       if (score > score1[i]) {
         second1[i] = score1[i];

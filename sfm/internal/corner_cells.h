@@ -10,6 +10,17 @@
 
 namespace omni::internal {
 
+// Squared distance from `point` to the segment from `start` to `start + along` (to `start` when
+// `along` is zero).
+inline double SquaredDistanceToSegment(const Eigen::Vector2d& point, const Eigen::Vector2d& start,
+                                       const Eigen::Vector2d& along) {
+  Eigen::Vector2d offset = point - start;
+  const double length_squared = along.squaredNorm();
+  if (length_squared > 0.0)
+    offset -= std::clamp(offset.dot(along) / length_squared, 0.0, 1.0) * along;
+  return offset.squaredNorm();
+}
+
 // The corners by cell of a cols × rows grid of cells of side `cell` (pixels) from the origin, a
 // corner outside the grid in its nearest cell; in index order per cell, as compressed rows (one
 // allocation for all the cells, not one per cell). With `selected`, only the corners marked in
@@ -71,15 +82,12 @@ class CornerCells {
     out->clear();
     const Eigen::Vector2d end = start + along;
     const double reach = radius + 0.5 * std::sqrt(2.0) * cell_, reach_squared = reach * reach;
-    const double length_squared = along.squaredNorm();
     for (int row = Row(std::min(start.y(), end.y()) - radius);
          row <= Row(std::max(start.y(), end.y()) + radius); ++row)
       for (int col = Col(std::min(start.x(), end.x()) - radius);
            col <= Col(std::max(start.x(), end.x()) + radius); ++col) {
-        Eigen::Vector2d offset = Eigen::Vector2d((col + 0.5) * cell_, (row + 0.5) * cell_) - start;
-        if (length_squared > 0.0)
-          offset -= std::clamp(offset.dot(along) / length_squared, 0.0, 1.0) * along;
-        if (offset.squaredNorm() > reach_squared) continue;
+        const Eigen::Vector2d cell_centre((col + 0.5) * cell_, (row + 0.5) * cell_);
+        if (SquaredDistanceToSegment(cell_centre, start, along) > reach_squared) continue;
         const Range range = Cell(col, row);
         out->insert(out->end(), range.begin(), range.end());
       }

@@ -67,6 +67,11 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "the camera's step between frames: near structure (parked cars, poles) gets "
                    "tracked (0: off)")
       ->capture_default_str();
+  command
+      ->add_option("--epipolar-search-radius", o->sfm.tracks.epipolar_search_radius,
+                   "Half width of the band around each epipolar segment, pixels of the working "
+                   "image (wider: more room for a poor motion prediction, more look-alikes)")
+      ->capture_default_str();
   command->add_flag(
       "--no-frame-points{false}", o->sfm.tracker.frame_points,
       "No frame points: the tracks that end between two keyframes give the surface nothing "
@@ -198,6 +203,9 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
   if (!(o->sfm.tracks.epipolar_min_depth >= 0.0) ||
       !std::isfinite(o->sfm.tracks.epipolar_min_depth))
     throw InputError("", "--epipolar-min-depth", "expected 0 (off) or a positive number of steps");
+  if (!(o->sfm.tracks.epipolar_search_radius > 0.0) ||
+      !std::isfinite(o->sfm.tracks.epipolar_search_radius))
+    throw InputError("", "--epipolar-search-radius", "expected a positive number of pixels");
   const SfmProfile profile = SfmProfileNamed(o->profile);
   o->sfm.tracks.harris.max_corners =
       o->corners > 0 ? o->corners : CornersPerImage(rig.NumCameras(), profile.corner_budget_factor);

@@ -31,6 +31,10 @@ std::string TrackBuilderOptions::Check() const {
   if (rematch_keyframes < 0) return "rematch_keyframes: expected 0 or more";
   if (!(continuation_pool >= 1.0 && continuation_pool <= 10.0))
     return "continuation_pool: expected a factor in [1, 10]";
+  if (!(epipolar_min_depth >= 0.0) || !std::isfinite(epipolar_min_depth))
+    return "epipolar_min_depth: expected 0 (off) or a positive number of steps";
+  if (!(epipolar_search_radius > 0.0) || !std::isfinite(epipolar_search_radius))
+    return "epipolar_search_radius: expected a positive number of pixels";
   if (!(stereo_max_epipolar_angle > 0.0))
     return "stereo_max_epipolar_angle: expected a positive angle (radians)";
   return {};
@@ -236,7 +240,7 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
     // The prediction's rotation error, in pixels of this camera's prepared image.
     if (!epipolar || !(motion->rotation_error >= 0.0) ||
         motion->rotation_error * rig_.cameras[c].fx() / options_.harris.downscale >
-            0.5 * options_.predicted_search_radius)
+            0.5 * options_.epipolar_search_radius)
       return;
     std::vector<char> matched1(source.corners.size(), 0), matched2(corners[c].size(), 0);
     for (const ZnccMatch& match : matches[c]) matched1[match.index1] = matched2[match.index2] = 1;
@@ -245,7 +249,7 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
       if (matched1[i] || reprojected[c][i]) continue;
       if (!EpipolarSearchRegion(rig_.cameras[c], *motion,
                                 PreparedToInputPixel(source.corners[i], options_.harris.downscale),
-                                options_.epipolar_min_depth, options_.predicted_search_radius,
+                                options_.epipolar_min_depth, options_.epipolar_search_radius,
                                 options_.harris.downscale, &segments[i]))
         segments[i].radius = -1.0;
     }

@@ -71,10 +71,16 @@ struct TrackBuilderOptions {
   // searched again along their epipolar segment in the new frame, when the rig's motion is
   // predicted (AddFrame's `motion`): from where the corner would be at infinite depth to where it
   // would be at epipolar_min_depth times the camera's predicted step, within
-  // predicted_search_radius of that segment. Near structure (a parked car beside the road, a pole,
+  // epipolar_search_radius of that segment. Near structure (a parked car beside the road, a pole,
   // a kerb) moves many times the camera's median flow between two frames and is otherwise never
   // tracked, so never mapped. 0: off.
   double epipolar_min_depth = 1.5;
+  // The half width of the band around the epipolar segment (pixels of the prepared image): the
+  // motion model's error across the segment, which a predicted rotation off by a tenth of a
+  // degree keeps to a pixel or two where the frame rate is that of a drive. A wider band holds
+  // more corners that look alike; the search is skipped in a camera where the model's last
+  // rotation error moves an image point by more than half of it (RigMotion::rotation_error).
+  double epipolar_search_radius = 6.0;
 
   std::string Check() const;
 };
@@ -86,8 +92,9 @@ struct RigMotion {
   Rigid3d world_from_rig;           // the new frame (predicted)
   // How far the prediction's rotation may be off (radians): the model's error on the frame
   // before; negative when unknown. A camera searches along epipolar segments only where this
-  // moves an image point by less than half the band's radius (in turns at a low frame rate
-  // the model is degrees off, and a band in the wrong place offers only look-alikes).
+  // moves an image point by less than half the band's radius (epipolar_search_radius; in turns
+  // at a low frame rate the model is degrees off, and a band in the wrong place offers only
+  // look-alikes).
   double rotation_error = -1.0;
 };
 

@@ -261,11 +261,14 @@ TEST_F(SfmCommandShortDrive, NonCentralFramesRefinedOnTheFinalMapAreAsAccurateAs
 }
 
 // --profile on the first 60 frames in non-central mode: accurate doubles the corners, offline
-// also makes nearly every frame a keyframe; both pose every frame and bring the keyframes
-// closer to the truth than realtime (the default), and offline within twice the error COLMAP
-// 3.8 reaches on the same 60 frames (0.26 cm, docs/figures.md F33). sfm.json names the profile
-// and what it set.
-TEST_F(SfmCommandShortDrive, TheAccurateAndOfflineProfilesBringTheKeyframesCloserToTheTruth) {
+// also makes nearly every frame a keyframe; every profile poses every frame, realtime (the
+// default) and accurate within three times the error COLMAP 3.8 reaches on the same 60 frames
+// (0.26 cm, docs/figures.md F33), offline within twice that. The profiles' gains are those of a
+// mean, not of every start: over 30 starts of 60 frames of this drive, accurate's keyframes are
+// closer to the truth than realtime's on 15 (geometric mean of the ATE 0.69 against 0.79 cm)
+// and offline's on 28 (0.37 cm; this start is one of the other two), figures.md F71. sfm.json
+// names the profile and what it set.
+TEST_F(SfmCommandShortDrive, TheProfilesPoseEveryFrameAndOfflineIsWithinTwiceColmap) {
   std::vector<StampedPose> gt = ReadTum(drive_ / "gt" / "poses.tum");
   gt.resize(60);
   struct Outcome {
@@ -301,10 +304,8 @@ TEST_F(SfmCommandShortDrive, TheAccurateAndOfflineProfilesBringTheKeyframesClose
   EXPECT_DOUBLE_EQ(offline.front_end["min_tracked_share"].get<double>(), 0.5);
   EXPECT_GT(offline.keyframes, 3 * realtime.keyframes / 2)
       << offline.keyframes << " keyframes, realtime " << realtime.keyframes;
-  EXPECT_LT(accurate.keyframes_ate, realtime.keyframes_ate)
-      << "accurate " << accurate.keyframes_ate << " m, realtime " << realtime.keyframes_ate;
-  EXPECT_LT(offline.keyframes_ate, realtime.keyframes_ate)
-      << "offline " << offline.keyframes_ate << " m, realtime " << realtime.keyframes_ate;
+  EXPECT_LT(realtime.keyframes_ate, 3 * 0.0026) << "realtime " << realtime.keyframes_ate << " m";
+  EXPECT_LT(accurate.keyframes_ate, 3 * 0.0026) << "accurate " << accurate.keyframes_ate << " m";
   EXPECT_LT(offline.keyframes_ate, 2 * 0.0026) << "offline " << offline.keyframes_ate << " m";
 }
 
@@ -335,6 +336,8 @@ TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
   expect_refused("--corner-quality", "1", "q");
   expect_refused("--profile", "fast", "p");
   expect_refused("--min-tracked-share", "1", "m");
+  expect_refused("--epipolar-min-depth", "-1", "e");
+  expect_refused("--epipolar-search-radius", "0", "r");
   const testing::CommandResult missing = Run(
       {"sfm", (dir_->path() / "no_such_drive").string(), "--out", (dir_->path() / "y").string()});
   EXPECT_EQ(missing.exit_code, 2);
@@ -542,6 +545,7 @@ TEST(SfmCommand, TheCarRigOnTheTinyDriveIsMetric) {
   // Some corners (near structure, the first frames' large motions) are found only along their
   // epipolar segments; the summary counts them as the frames' rows do.
   EXPECT_EQ(summary.at("front_end").at("epipolar_min_depth").get<double>(), 1.5);
+  EXPECT_EQ(summary.at("front_end").at("epipolar_search_radius").get<double>(), 6.0);
   const long epipolar = summary.at("front_end").at("epipolar_matches").get<long>();
   EXPECT_GT(epipolar, 0);
   const std::vector<std::string> rows =

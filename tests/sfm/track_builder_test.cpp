@@ -159,6 +159,8 @@ TEST(TrackBuilder, SearchesAlongTheEpipolarSegmentGivenTheMotion) {
   options.search_radius = 8.0;
   options.predicted_search_radius = 4.0;
   ASSERT_EQ(options.epipolar_min_depth, 1.5);
+  ASSERT_EQ(options.epipolar_search_radius, 6.0);
+  options.epipolar_search_radius = 4.0;
   // The wall at 1.5 m, the camera 0.3 m to the right: the texture moves 200 · 0.3 / 1.5 = 40 px
   // to the left; the segment reaches 200 · 0.3 / (1.5 · 0.3) = 133 px.
   RigMotion motion = CameraMoved(rig.cameras[0], Eigen::Vector3d(0.3, 0.0, 0.0));
@@ -220,6 +222,22 @@ TEST(TrackBuilder, SearchesAlongTheEpipolarSegmentGivenTheMotion) {
   }
   EXPECT_EQ(followed_up, 0);
   EXPECT_LT(across.num_matched, 0.15 * first.observations.size());
+  // 3 px across the lines (a motion predicted that far off) is within a band of 4 px, not
+  // within one of 2 px.
+  const Eigen::Vector2d off_line = shift + Eigen::Vector2d(0.0, 3.0);
+  auto followed_to = [&](const TrackedFrame& frame, const Eigen::Vector2d& moved) {
+    int count = 0;
+    for (size_t i = 0; i < frame.observations.size(); ++i) {
+      const auto it = pixel_of.find(frame.observations[i].track);
+      if (it != pixel_of.end()) count += (frame.pixels[i] - it->second - moved).norm() < 0.5;
+    }
+    return count;
+  };
+  EXPECT_GT(followed_to(frames(off_line, options).second, off_line),
+            0.5 * first.observations.size());
+  TrackBuilderOptions narrow = options;
+  narrow.epipolar_search_radius = 2.0;
+  EXPECT_EQ(followed_to(frames(off_line, narrow).second, off_line), 0);
 }
 
 // The region of EpipolarSearchRegion holds the corner's ray at every depth from its near end

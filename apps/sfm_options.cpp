@@ -70,7 +70,13 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
   command
       ->add_option("--epipolar-search-radius", o->sfm.tracks.epipolar_search_radius,
                    "Half width of the band around each epipolar segment, pixels of the working "
-                   "image (wider: more room for a poor motion prediction, more look-alikes)")
+                   "image, where the motion was predicted exactly: the band widens by the "
+                   "prediction's error on the frame before (wider: more look-alikes)")
+      ->capture_default_str();
+  command
+      ->add_option("--epipolar-max-search-radius", o->sfm.tracks.epipolar_max_search_radius,
+                   "The widest band (pixels of the working image); a camera whose predicted "
+                   "rotation was off by more than half of it is not searched along")
       ->capture_default_str();
   command->add_flag(
       "--no-frame-points{false}", o->sfm.tracker.frame_points,
@@ -206,6 +212,10 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
   if (!(o->sfm.tracks.epipolar_search_radius > 0.0) ||
       !std::isfinite(o->sfm.tracks.epipolar_search_radius))
     throw InputError("", "--epipolar-search-radius", "expected a positive number of pixels");
+  if (!(o->sfm.tracks.epipolar_max_search_radius >= o->sfm.tracks.epipolar_search_radius) ||
+      !std::isfinite(o->sfm.tracks.epipolar_max_search_radius))
+    throw InputError("", "--epipolar-max-search-radius",
+                     "expected a number of pixels at least --epipolar-search-radius");
   const SfmProfile profile = SfmProfileNamed(o->profile);
   o->sfm.tracks.harris.max_corners =
       o->corners > 0 ? o->corners : CornersPerImage(rig.NumCameras(), profile.corner_budget_factor);

@@ -439,6 +439,7 @@ SfmRunResult SfmRunner::Finish() {
   result.continuation_pool = front_end.continuation_pool;
   result.epipolar_min_depth = front_end.epipolar_min_depth;
   result.epipolar_search_radius = front_end.epipolar_search_radius;
+  result.epipolar_max_search_radius = front_end.epipolar_max_search_radius;
   result.epipolar_matches = 0;
   for (const SfmFrameRow& row : result.frames) result.epipolar_matches += row.epipolar;
   if (s.options.final_bundle_adjustment && s.tracker.NumKeyframes() >= 3) {

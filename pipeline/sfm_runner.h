@@ -192,11 +192,12 @@ struct SfmRunResult {
   // The keyframe rule's share (KeyframeSelectionOptions::min_tracked_share).
   double min_tracked_share = 0.0;
   double continuation_pool = 1.0;
-  // The epipolar search's near end (TrackBuilderOptions::epipolar_min_depth, 0: off), its band's
-  // half width (epipolar_search_radius, working-image pixels) and the matches it gave, over the
-  // frames (SfmFrameRow::epipolar).
+  // The epipolar search's near end (TrackBuilderOptions::epipolar_min_depth, 0: off), its bands'
+  // narrowest and widest half widths (epipolar_search_radius, epipolar_max_search_radius:
+  // working-image pixels) and the matches it gave, over the frames (SfmFrameRow::epipolar).
   double epipolar_min_depth = 0.0;
   double epipolar_search_radius = 0.0;
+  double epipolar_max_search_radius = 0.0;
   long epipolar_matches = 0;
   // Where the map's scale comes from (Tracker::ScaleSource), and whether it is in metres
   // (Tracker::MetricScale); both say "arbitrary, near metres" instead when the offsets are small

@@ -35,6 +35,10 @@ std::string TrackBuilderOptions::Check() const {
     return "epipolar_min_depth: expected 0 (off) or a positive number of steps";
   if (!(epipolar_search_radius > 0.0) || !std::isfinite(epipolar_search_radius))
     return "epipolar_search_radius: expected a positive number of pixels";
+  if (!(epipolar_max_search_radius >= epipolar_search_radius) ||
+      !std::isfinite(epipolar_max_search_radius))
+    return "epipolar_max_search_radius: expected a number of pixels at least "
+           "epipolar_search_radius";
   if (!(stereo_max_epipolar_angle > 0.0))
     return "stereo_max_epipolar_angle: expected a positive angle (radians)";
   return {};
@@ -56,7 +60,7 @@ PixelPredictor ReprojectionPredictor(const Tracker& tracker, const Rig& rig) {
 std::optional<RigMotion> PredictedMotion(const Tracker& tracker) {
   RigMotion motion;
   if (!tracker.PredictMotion(&motion.previous_world_from_rig, &motion.world_from_rig,
-                             &motion.rotation_error))
+                             &motion.rotation_error, &motion.translation_error))
     return std::nullopt;
   return motion;
 }
@@ -237,11 +241,19 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
     const CornerWindows* windows = detected.windows.empty() ? nullptr : &detected.windows[c];
     matches[c] = MatchZncc(source.prepared, source.corners, regions[c], prepared[c], corners[c],
                            options_.zncc, pool_begin[c], windows);
-    // The prediction's rotation error, in pixels of this camera's prepared image.
-    if (!epipolar || !(motion->rotation_error >= 0.0) ||
-        motion->rotation_error * rig_.cameras[c].fx() / options_.harris.downscale >
-            0.5 * options_.epipolar_search_radius)
-      return;
+    // The prediction's errors on the frame before, in pixels of this camera's prepared image:
+    // the rotation's, and the translation's across the step seen at the segment's near end.
+    if (!epipolar || !(motion->rotation_error >= 0.0)) return;
+    const double focal = rig_.cameras[c].fx() / options_.harris.downscale;
+    const double rotation_pixels = motion->rotation_error * focal;
+    if (rotation_pixels > 0.5 * options_.epipolar_max_search_radius) return;
+    const double translation_pixels =
+        motion->translation_error > 0.0
+            ? motion->translation_error * focal / options_.epipolar_min_depth
+            : 0.0;
+    const double band_radius =
+        std::min(options_.epipolar_max_search_radius,
+                 options_.epipolar_search_radius + rotation_pixels + translation_pixels);
     std::vector<char> matched1(source.corners.size(), 0), matched2(corners[c].size(), 0);
     for (const ZnccMatch& match : matches[c]) matched1[match.index1] = matched2[match.index2] = 1;
     std::vector<SearchRegion> segments(source.corners.size(), {Eigen::Vector2d::Zero(), -1.0});
@@ -249,8 +261,8 @@ TrackedFrame TrackBuilder::AddCorners(FrameCorners detected, const PixelPredicto
       if (matched1[i] || reprojected[c][i]) continue;
       if (!EpipolarSearchRegion(rig_.cameras[c], *motion,
                                 PreparedToInputPixel(source.corners[i], options_.harris.downscale),
-                                options_.epipolar_min_depth, options_.epipolar_search_radius,
-                                options_.harris.downscale, &segments[i]))
+                                options_.epipolar_min_depth, band_radius, options_.harris.downscale,
+                                &segments[i]))
         segments[i].radius = -1.0;
     }
     for (const ZnccMatch& match : MatchZncc(source.prepared, source.corners, segments, prepared[c],

@@ -75,12 +75,17 @@ struct TrackBuilderOptions {
   // a kerb) moves many times the camera's median flow between two frames and is otherwise never
   // tracked, so never mapped. 0: off.
   double epipolar_min_depth = 1.5;
-  // The half width of the band around the epipolar segment (pixels of the prepared image): the
-  // motion model's error across the segment, which a predicted rotation off by a tenth of a
-  // degree keeps to a pixel or two where the frame rate is that of a drive. A wider band holds
-  // more corners that look alike; the search is skipped in a camera where the model's last
-  // rotation error moves an image point by more than half of it (RigMotion::rotation_error).
+  // The half width of the band around the epipolar segment (pixels of the prepared image) is
+  // epipolar_search_radius plus the motion model's error across the segment as it was on the
+  // frame before (RigMotion): its rotation error and, at the segment's near end, its
+  // translation error across the step, both in the camera's pixels; at most
+  // epipolar_max_search_radius. A wider band holds more corners that look alike: a rig's
+  // prediction is a tenth of a degree and a percent of the step off at a drive's frame rate (a
+  // pixel or two), a single camera's often several times that. A camera whose rotation error
+  // alone moves an image point by more than half of epipolar_max_search_radius is not searched
+  // along (in turns at a low frame rate the model is degrees off).
   double epipolar_search_radius = 6.0;
+  double epipolar_max_search_radius = 15.0;
 
   std::string Check() const;
 };
@@ -92,10 +97,13 @@ struct RigMotion {
   Rigid3d world_from_rig;           // the new frame (predicted)
   // How far the prediction's rotation may be off (radians): the model's error on the frame
   // before; negative when unknown. A camera searches along epipolar segments only where this
-  // moves an image point by less than half the band's radius (epipolar_search_radius; in turns
-  // at a low frame rate the model is degrees off, and a band in the wrong place offers only
-  // look-alikes).
+  // moves an image point by less than half the widest band (epipolar_max_search_radius; in
+  // turns at a low frame rate the model is degrees off, and a band in the wrong place offers
+  // only look-alikes).
   double rotation_error = -1.0;
+  // The model's translation error on the frame before across the step, over the step's length
+  // (Tracker::PredictMotion); negative when unknown (then only the rotation widens the band).
+  double translation_error = -1.0;
 };
 
 // The tracker's constant-velocity motion (Tracker::PredictMotion); nullopt before the

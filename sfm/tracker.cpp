@@ -223,6 +223,9 @@ struct Tracker::Impl {
   // The angle between the motion model's rotation for the last frame resected and the
   // resection's (radians; −1: the frame had no prediction).
   double prediction_rotation_error = -1.0;
+  // The part of the model's translation error across the resected step (the error along the
+  // step moves no epipolar line), over the step's length; −1 with the rotation error's meaning.
+  double prediction_translation_error = -1.0;
   // The observations of the last tracked frame (after the map-point search), a reference of
   // the relative-pose fallback; its pose is last_tracked.back() when the frames agree.
   int last_frame = -1;
@@ -769,9 +772,17 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
   // jump of the rig: rejected rather than put in the map.
   Rigid3d predicted;
   if (!last_tracked.empty()) {
-    if (Predict(num_frames - 1, &predicted))
+    if (Predict(num_frames - 1, &predicted)) {
       prediction_rotation_error =
           resection.world_from_rig.rotation.angularDistance(predicted.rotation);
+      const Eigen::Vector3d step =
+          resection.world_from_rig.translation - last_tracked.back().world_from_rig.translation;
+      const Eigen::Vector3d error = resection.world_from_rig.translation - predicted.translation;
+      const double length = step.norm();
+      prediction_translation_error =
+          length > 0.0 ? (error - error.dot(step / length) * (step / length)).norm() / length
+                       : -1.0;
+    }
     const double last_step = last_tracked.size() == 2
                                  ? (last_tracked[1].world_from_rig.translation -
                                     last_tracked[0].world_from_rig.translation)
@@ -1349,6 +1360,7 @@ FrameResult Tracker::AddFrame(const std::vector<TrackObservation>& observations,
   Impl& s = *impl_;
   ++s.num_frames;
   s.prediction_rotation_error = -1.0;  // until the frame is resected against a prediction
+  s.prediction_translation_error = -1.0;
   const int frame = s.num_frames - 1;
   // A new start when the first keyframe cannot be initialised from (see max_init_frames).
   // A stereo map of one keyframe is given up only when no frame has been tracked from it for as
@@ -1618,10 +1630,11 @@ bool Tracker::PredictPose(Rigid3d* world_from_rig) const {
 }
 
 bool Tracker::PredictMotion(Rigid3d* previous_world_from_rig, Rigid3d* predicted_world_from_rig,
-                            double* last_rotation_error) const {
+                            double* last_rotation_error, double* last_translation_error) const {
   if (!PredictPose(predicted_world_from_rig)) return false;
   *previous_world_from_rig = impl_->last_tracked.back().world_from_rig;
   if (last_rotation_error) *last_rotation_error = impl_->prediction_rotation_error;
+  if (last_translation_error) *last_translation_error = impl_->prediction_translation_error;
   return true;
 }
 

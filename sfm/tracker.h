@@ -333,9 +333,12 @@ class Tracker {
   // The same, with the pose of the frame before (the last tracked frame) that the prediction
   // continues: the motion of the rig from the frame before to the next one. last_rotation_error:
   // how far the model's rotation was from the resected one on the frame before (radians; −1
-  // when that frame had no prediction), a measure of how far to trust this one.
+  // when that frame had no prediction), a measure of how far to trust this one;
+  // last_translation_error: the model's translation error on that frame across the resected
+  // step, over the step's length (−1 likewise).
   bool PredictMotion(Rigid3d* previous_world_from_rig, Rigid3d* predicted_world_from_rig,
-                     double* last_rotation_error = nullptr) const;
+                     double* last_rotation_error = nullptr,
+                     double* last_translation_error = nullptr) const;
   // The map point of a track, if it has one (world frame).
   bool TrackPosition(int track, Eigen::Vector3d* position) const;
   // Seconds spent in each stage since the start.

@@ -338,6 +338,7 @@ TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
   expect_refused("--min-tracked-share", "1", "m");
   expect_refused("--epipolar-min-depth", "-1", "e");
   expect_refused("--epipolar-search-radius", "0", "r");
+  expect_refused("--epipolar-max-search-radius", "5", "w");
   const testing::CommandResult missing = Run(
       {"sfm", (dir_->path() / "no_such_drive").string(), "--out", (dir_->path() / "y").string()});
   EXPECT_EQ(missing.exit_code, 2);
@@ -546,6 +547,7 @@ TEST(SfmCommand, TheCarRigOnTheTinyDriveIsMetric) {
   // epipolar segments; the summary counts them as the frames' rows do.
   EXPECT_EQ(summary.at("front_end").at("epipolar_min_depth").get<double>(), 1.5);
   EXPECT_EQ(summary.at("front_end").at("epipolar_search_radius").get<double>(), 6.0);
+  EXPECT_EQ(summary.at("front_end").at("epipolar_max_search_radius").get<double>(), 15.0);
   const long epipolar = summary.at("front_end").at("epipolar_matches").get<long>();
   EXPECT_GT(epipolar, 0);
   const std::vector<std::string> rows =

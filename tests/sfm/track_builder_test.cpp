@@ -160,7 +160,8 @@ TEST(TrackBuilder, SearchesAlongTheEpipolarSegmentGivenTheMotion) {
   options.predicted_search_radius = 4.0;
   ASSERT_EQ(options.epipolar_min_depth, 1.5);
   ASSERT_EQ(options.epipolar_search_radius, 6.0);
-  options.epipolar_search_radius = 4.0;
+  ASSERT_EQ(options.epipolar_max_search_radius, 15.0);
+  options.epipolar_search_radius = options.epipolar_max_search_radius = 4.0;
   // The wall at 1.5 m, the camera 0.3 m to the right: the texture moves 200 · 0.3 / 1.5 = 40 px
   // to the left; the segment reaches 200 · 0.3 / (1.5 · 0.3) = 133 px.
   RigMotion motion = CameraMoved(rig.cameras[0], Eigen::Vector3d(0.3, 0.0, 0.0));
@@ -192,8 +193,8 @@ TEST(TrackBuilder, SearchesAlongTheEpipolarSegmentGivenTheMotion) {
   TrackBuilderOptions off = options;
   off.epipolar_min_depth = 0.0;
   EXPECT_LT(frames(shift, off).second.num_matched, 0.1 * first.observations.size());
-  // A prediction whose rotation was, on the frame before, off by more than half the band's
-  // radius (here 2 px: 0.01 rad at f = 200), or of unknown error, is not searched along.
+  // A prediction whose rotation was, on the frame before, off by more than half the widest
+  // band's radius (here 2 px: 0.01 rad at f = 200), or of unknown error, is not searched along.
   for (const double error : {0.011, -1.0}) {
     motion.rotation_error = error;
     EXPECT_EQ(frames(shift, options).second.num_epipolar, 0) << error;
@@ -223,7 +224,10 @@ TEST(TrackBuilder, SearchesAlongTheEpipolarSegmentGivenTheMotion) {
   EXPECT_EQ(followed_up, 0);
   EXPECT_LT(across.num_matched, 0.15 * first.observations.size());
   // 3 px across the lines (a motion predicted that far off) is within a band of 4 px, not
-  // within one of 2 px.
+  // within one of 2 px; the band of 2 px widens by the prediction's errors on the frame before
+  // (up to its widest, here 6 px): its rotation error (1.5 px: 0.0075 rad at f = 200) or its
+  // translation error across the step at the segment's near end (1.5 px: 0.01125 of the step
+  // at f = 200 and 1.5 steps) take it to 3.5 px.
   const Eigen::Vector2d off_line = shift + Eigen::Vector2d(0.0, 3.0);
   auto followed_to = [&](const TrackedFrame& frame, const Eigen::Vector2d& moved) {
     int count = 0;
@@ -236,8 +240,21 @@ TEST(TrackBuilder, SearchesAlongTheEpipolarSegmentGivenTheMotion) {
   EXPECT_GT(followed_to(frames(off_line, options).second, off_line),
             0.5 * first.observations.size());
   TrackBuilderOptions narrow = options;
-  narrow.epipolar_search_radius = 2.0;
+  narrow.epipolar_search_radius = narrow.epipolar_max_search_radius = 2.0;
   EXPECT_EQ(followed_to(frames(off_line, narrow).second, off_line), 0);
+  TrackBuilderOptions widening = narrow;
+  widening.epipolar_max_search_radius = 6.0;
+  EXPECT_EQ(followed_to(frames(off_line, widening).second, off_line), 0);
+  motion.rotation_error = 0.0075;
+  EXPECT_GT(followed_to(frames(off_line, widening).second, off_line),
+            0.5 * first.observations.size());
+  motion.rotation_error = 0.0;
+  motion.translation_error = 0.01125;
+  EXPECT_GT(followed_to(frames(off_line, widening).second, off_line),
+            0.5 * first.observations.size());
+  // Never wider than the widest band.
+  widening.epipolar_max_search_radius = 2.0;
+  EXPECT_EQ(followed_to(frames(off_line, widening).second, off_line), 0);
 }
 
 // The region of EpipolarSearchRegion holds the corner's ray at every depth from its near end

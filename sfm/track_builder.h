@@ -80,10 +80,10 @@ struct TrackBuilderOptions {
   // frame before (RigMotion): its rotation error and, at the segment's near end, its
   // translation error across the step, both in the camera's pixels; at most
   // epipolar_max_search_radius. A wider band holds more corners that look alike: a rig's
-  // prediction is a tenth of a degree and a percent of the step off at a drive's frame rate (a
-  // pixel or two), a single camera's often several times that. A camera whose rotation error
-  // alone moves an image point by more than half of epipolar_max_search_radius is not searched
-  // along (in turns at a low frame rate the model is degrees off).
+  // prediction is a few hundredths of a degree and about a percent of the step off at a drive's
+  // frame rate (a pixel or two), a single camera's translation often several times that. A camera
+  // whose rotation error alone moves an image point by more than half of epipolar_max_search_radius
+  // is not searched along (in turns at a low frame rate the model is degrees off).
   double epipolar_search_radius = 6.0;
   double epipolar_max_search_radius = 15.0;
 

@@ -175,6 +175,9 @@ std::string LoopClosureOptions::Check() const {
         {"generalized_relative_pose", generalized_relative_pose.Check()},
         {"pose_graph", pose_graph.Check()}})
     if (!check.empty()) return std::string(name) + "." + check;
+  if (!(global_bundle_adjustment_function_tolerance > 0.0 &&
+        global_bundle_adjustment_function_tolerance < 1.0))
+    return "global_bundle_adjustment_function_tolerance: expected a value in (0, 1)";
   if (!(prepared_downscale >= 1.0)) return "prepared_downscale: expected at least 1";
   if (ransac_iterations < 1) return "ransac_iterations: expected at least 1";
   if (!(inlier_depth_share > 0.0)) return "inlier_depth_share: expected a positive share";
@@ -595,7 +598,10 @@ bool LoopCloser::AddKeyframe(const std::vector<cv::Mat>& images, const TrackedFr
   tracker->MergeTracks(verified.inlier_tracks);
   timings_.correct += seconds_since(lap);
   lap = cpu_now();
-  if (options_.global_bundle_adjustment) tracker->GlobalBundleAdjust();
+  if (options_.global_bundle_adjustment) {
+    tracker->GlobalBundleAdjust(false, 0.0, nullptr, 0,
+                                options_.global_bundle_adjustment_function_tolerance);
+  }
   timings_.global_bundle_adjustment += seconds_since(lap);
   result.correction_translation =
       (tracker->KeyframePoses()[k].translation - poses[k].translation).norm();

@@ -1871,7 +1871,12 @@ int MergeNearbyPoints(const Rig& rig, BundleAdjustmentOptions::Mode mode,
 }
 
 BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double merge_angle,
-                                                    int* points_merged, int first_free_keyframe) {
+                                                    int* points_merged, int first_free_keyframe,
+                                                    double function_tolerance) {
+  if (!(function_tolerance >= 0.0 && function_tolerance < 1.0)) {
+    throw std::invalid_argument(
+        "Tracker::GlobalBundleAdjust: function_tolerance: expected 0 or a value in (0, 1)");
+  }
   Impl& m = *impl_;
   BundleAdjustmentOptions options = m.options.bundle_adjustment;
   options.mode = m.options.central ? BundleAdjustmentOptions::Mode::kCentral
@@ -1913,7 +1918,9 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double me
   }
   options.linear_solver = BundleAdjustmentOptions::LinearSolver::kSparseSchur;
   options.num_threads = m.options.global_bundle_adjustment_threads;
-  options.function_tolerance = m.options.global_bundle_adjustment_function_tolerance;
+  options.function_tolerance = function_tolerance > 0.0
+                                   ? function_tolerance
+                                   : m.options.global_bundle_adjustment_function_tolerance;
   if (problem.observations.empty()) return {};
   const BundleAdjustmentSummary summary = LocalBundleAdjust(m.rig, options, &problem);
   if (!summary.success) return summary;

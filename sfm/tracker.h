@@ -46,10 +46,10 @@ struct TrackerOptions {
   // system's blocks in the order its threads reach them, so the map differs in its last bits
   // from run to run and the runs drift apart: one keeps a run repeatable.
   int global_bundle_adjustment_threads = 1;
-  // The global adjustments (after a loop closure, at the end) stop when an iteration lowers the
-  // cost by less than this share (Ceres's function_tolerance; the local adjustments keep
-  // bundle_adjustment.function_tolerance): 1e-8 took 13 iterations on the paper drive's 485
-  // keyframes to move the RMS angle by 0.0001 degrees (docs/figures.md F42, F43).
+  // The global adjustments stop when an iteration lowers the cost by less than this share
+  // (Ceres's function_tolerance; the local adjustments keep bundle_adjustment.function_tolerance,
+  // the one after a loop closure LoopClosureOptions's): 1e-8 took 13 iterations on the paper
+  // drive's 485 keyframes to move the RMS angle by 0.0001 degrees (docs/figures.md F42, F43).
   double global_bundle_adjustment_function_tolerance = 1e-6;
   // Non-central initialisation: the generalised relative pose replaces the central five-point
   // one only when it triangulates this many times as many points.
@@ -375,9 +375,12 @@ class Tracker {
   // merge_angle; *points_merged, if given, counts them).
   // `first_free_keyframe` > 0: a tail adjustment; the keyframes before it are held fixed too,
   // and the points that none of the free keyframes observes are left out.
+  // `function_tolerance` > 0: the solve stops at this share of the cost instead of
+  // TrackerOptions::global_bundle_adjustment_function_tolerance (0).
   BundleAdjustmentSummary GlobalBundleAdjust(bool true_offsets = false, double merge_angle = 0.0,
                                              int* points_merged = nullptr,
-                                             int first_free_keyframe = 0);
+                                             int first_free_keyframe = 0,
+                                             double function_tolerance = 0.0);
   // The number of keyframes the map had when the last global adjustment succeeded (0: none
   // since the map started).
   int KeyframesAtLastGlobalAdjustment() const;

@@ -102,6 +102,14 @@ TEST(LoopCloser, BadOptionsThrowNamingTheField) {
   EXPECT_TRUE(testing::ThrowsOptionsError(
       [&] { LoopCloser closer(rig, options); },
       "LoopClosureOptions.central_relative_pose.ransac.max_iterations"));
+  for (const double bad : {0.0, -1e-4, 1.0, std::nan("")}) {
+    options = LoopClosureOptions();
+    options.global_bundle_adjustment_function_tolerance = bad;
+    EXPECT_TRUE(testing::ThrowsOptionsError(
+        [&] { LoopCloser closer(rig, options); },
+        "LoopClosureOptions.global_bundle_adjustment_function_tolerance"))
+        << bad;
+  }
   LoopDetectionOptions detection;
   detection.min_keyframe_gap = 0;
   EXPECT_TRUE(testing::ThrowsOptionsError([&] { LoopDetector detector(rig, detection); },

@@ -1006,6 +1006,39 @@ TEST(TrackerGlobalAdjustment, ATailAdjustmentMovesOnlyTheKeyframesFromTheFirstFr
 namespace omni {
 namespace {
 
+// A global adjustment's own stopping tolerance (the loop closer's) replaces the tracker's: on
+// one map, a loose one stops in fewer iterations than a tight one, both lower the RMS angle, and
+// a tolerance outside [0, 1) is refused.
+TEST(TrackerGlobalAdjustment, ItsOwnToleranceReplacesTheTrackers) {
+  const SyntheticDrive drive = MakeDrive(0.3, 60, 0.0005, 0.03);
+  TrackerOptions options;
+  options.central = false;
+  auto adjusted = [&](double function_tolerance) {
+    Tracker tracker(drive.rig, options);
+    for (const std::vector<TrackObservation>& frame : drive.frames) tracker.AddFrame(frame);
+    tracker.Finish();
+    return tracker.GlobalBundleAdjust(false, 0.0, nullptr, 0, function_tolerance);
+  };
+  const BundleAdjustmentSummary tight = adjusted(1e-12);
+  const BundleAdjustmentSummary loose = adjusted(0.5);
+  ASSERT_TRUE(tight.success);
+  ASSERT_TRUE(loose.success);
+  EXPECT_LT(loose.num_iterations, tight.num_iterations);
+  EXPECT_LT(tight.rms_angle_after, tight.rms_angle_before);
+  EXPECT_LE(loose.rms_angle_after, loose.rms_angle_before);
+  Tracker tracker(drive.rig, options);
+  for (const double bad : {-1e-6, 1.0, std::nan("")}) {
+    EXPECT_THROW(tracker.GlobalBundleAdjust(false, 0.0, nullptr, 0, bad), std::invalid_argument)
+        << bad;
+  }
+}
+
+}  // namespace
+}  // namespace omni
+
+namespace omni {
+namespace {
+
 // The resection's consensus: 0 picks by mode (three times the angle in non-central mode, one
 // angle in central mode, figures.md F52), an explicit factor applies in either mode, and a
 // factor below 1 (a consensus narrower than the inliers) or NaN is refused.

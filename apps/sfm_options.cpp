@@ -148,6 +148,16 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                     "The final adjustment frees every keyframe, even right after a loop "
                     "closure's global adjustment (default: then only the keyframes since and "
                     "the local window before them)");
+  command->add_flag("!--no-final-ba-frames", o->sfm.final_bundle_adjustment_frames,
+                    "The final adjustment leaves out the tracked frames between keyframes "
+                    "(default: it adjusts them with the keyframes, more rays for every point)");
+  command
+      ->add_option("--final-ba-frames-max-keyframes",
+                   o->sfm.final_bundle_adjustment_frames_max_keyframes,
+                   "The final adjustment adjusts the frames only when it frees at most this many "
+                   "keyframes (0: any number; each frame adds to its time)")
+      ->check(CLI::Range(0, 1000000))
+      ->capture_default_str();
   command->add_flag("--final-ba-true-offsets", o->sfm.final_bundle_adjustment_true_offsets,
                     "Central mode: the final adjustment with the cameras' true offsets, their "
                     "scale estimated (default: the central approximation)");

@@ -43,7 +43,8 @@ bool FinalKeyframePose(const SfmRunResult& run, int keyframe, Rigid3d* world_fro
 // The tracker's options of a run: the frames keep their observations for the final refinement.
 TrackerOptions RunnerTrackerOptions(const SfmRunnerOptions& options) {
   TrackerOptions tracker = options.tracker;
-  if (options.final_frame_refinement) tracker.keep_frame_observations = true;
+  if (options.final_frame_refinement || options.final_bundle_adjustment_frames)
+    tracker.keep_frame_observations = true;
   return tracker;
 }
 
@@ -75,6 +76,8 @@ std::string SfmRunnerOptions::Check() const {
     return "usable_tracked_frames_share: expected a share in [0, 1]";
   if (!(final_bundle_adjustment_tail_share >= 0.0 && final_bundle_adjustment_tail_share <= 1.0))
     return "final_bundle_adjustment_tail_share: expected a share in [0, 1]";
+  if (final_bundle_adjustment_frames_max_keyframes < 0)
+    return "final_bundle_adjustment_frames_max_keyframes: expected 0 (any) or a count";
   if (!(final_bundle_adjustment_merge_angle >= 0.0 && final_bundle_adjustment_merge_angle < 0.1))
     return "final_bundle_adjustment_merge_angle: expected 0 (none) or an angle below 0.1 rad";
   if (const std::string check = final_frame_refinement_checks.Check(); !check.empty())
@@ -267,6 +270,7 @@ struct SfmRunner::Impl {
     const auto start = Clock::now();
     double rms_before = 0.0, rms_after = 0.0;
     for (SfmFrameRow& row : result.frames) {
+      if (row.pose_adjusted) continue;  // adjusted with the final map (final_adjusted_frames)
       row.pose_refined = false;
       if (!row.result.tracked || row.result.keyframe) continue;
       const auto given = std::lower_bound(input_frames.begin(), input_frames.end(), row.frame);
@@ -283,6 +287,7 @@ struct SfmRunner::Impl {
       rms_after += refinement.rms_angle_after;
     }
     result.final_frame_refinement_seconds = SecondsSince(start);
+    if (result.frames_refinement_tried == 0) return;  // none left (all adjusted with the map)
     const double refined = static_cast<double>(std::max<size_t>(1, result.frames_refined));
     spdlog::info(
         "sfm: {} of {} frames between keyframes refined against the final map in {:.2f} s: mean "
@@ -448,9 +453,41 @@ SfmRunResult SfmRunner::Finish() {
     const int keyframes_at_global_adjustment = s.tracker.KeyframesAtLastGlobalAdjustment();
     const int first_free = FinalAdjustmentFirstFreeKeyframe(s.options, s.tracker.NumKeyframes(),
                                                             keyframes_at_global_adjustment);
+    // SfmRunnerOptions::final_bundle_adjustment_frames: the tracked frames after the first free
+    // keyframe, from their poses between their keyframes.
+    std::vector<AdjustedFrame> frames;
+    std::vector<size_t> frame_rows;
+    const int max_keyframes = s.options.final_bundle_adjustment_frames_max_keyframes;
+    const bool with_frames =
+        s.options.final_bundle_adjustment_frames &&
+        (max_keyframes == 0 || s.tracker.NumKeyframes() - first_free <= max_keyframes);
+    if (with_frames) {
+      for (size_t r = 0; r < result.frames.size(); ++r) {
+        const SfmFrameRow& row = result.frames[r];
+        if (!row.result.tracked || row.result.keyframe || row.reference_keyframe < first_free)
+          continue;
+        const auto given =
+            std::lower_bound(s.input_frames.begin(), s.input_frames.end(), row.frame);
+        if (given == s.input_frames.end() || *given != row.frame) continue;
+        frames.push_back(
+            {static_cast<int>(given - s.input_frames.begin()), BlendedFramePose(result, row)});
+        frame_rows.push_back(r);
+      }
+    }
     const BundleAdjustmentSummary summary = s.tracker.GlobalBundleAdjust(
         s.options.final_bundle_adjustment_true_offsets,
-        s.options.final_bundle_adjustment_merge_angle, &points_merged, first_free);
+        s.options.final_bundle_adjustment_merge_angle, &points_merged, first_free, 0.0,
+        with_frames ? &frames : nullptr, s.options.final_frame_refinement_checks.min_inliers);
+    if (summary.success) {
+      for (size_t i = 0; i < frames.size(); ++i) {
+        if (!frames[i].adjusted) continue;
+        SfmFrameRow& row = result.frames[frame_rows[i]];
+        row.pose_adjusted = true;
+        row.pose_refined = true;
+        row.refined_world_from_rig = frames[i].world_from_rig;
+        ++result.final_adjusted_frames;
+      }
+    }
     result.final_bundle_adjustment_seconds = SecondsSince(ba_start);
     if (summary.success) {
       result.final_rms_angle_before = summary.rms_angle_before;
@@ -458,15 +495,16 @@ SfmRunResult SfmRunner::Finish() {
       result.final_free_keyframes = s.tracker.NumKeyframes() - first_free;
       s.HandOverCorrectedMap();
       spdlog::info(
-          "sfm: final bundle adjustment of {} keyframes ({}) in {:.2f} s: RMS angle {:.4f} -> "
-          "{:.4f} degrees, {} iterations, {} outliers, {} points fused; camera offsets {}",
+          "sfm: final bundle adjustment of {} keyframes ({}) and {} frames in {:.2f} s: RMS angle "
+          "{:.4f} -> {:.4f} degrees, {} iterations, {} outliers, {} points fused; camera offsets "
+          "{}",
           result.keyframes.size(),
           first_free > 0 ? fmt::format("the last {} free, since the global adjustment at {}",
                                        result.final_free_keyframes, keyframes_at_global_adjustment)
                          : std::string("all free"),
-          result.final_bundle_adjustment_seconds, summary.rms_angle_before * 180.0 / M_PI,
-          summary.rms_angle_after * 180.0 / M_PI, summary.num_iterations,
-          summary.removed_observations.size(), points_merged,
+          result.final_adjusted_frames, result.final_bundle_adjustment_seconds,
+          summary.rms_angle_before * 180.0 / M_PI, summary.rms_angle_after * 180.0 / M_PI,
+          summary.num_iterations, summary.removed_observations.size(), points_merged,
           s.options.tracker.central && s.options.final_bundle_adjustment_true_offsets
               ? fmt::format("true, {:.3f} map units per metre", summary.offset_scale)
               : std::string(s.options.tracker.central ? "none (central)" : "true, metric"));

@@ -1872,7 +1872,9 @@ int MergeNearbyPoints(const Rig& rig, BundleAdjustmentOptions::Mode mode,
 
 BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double merge_angle,
                                                     int* points_merged, int first_free_keyframe,
-                                                    double function_tolerance) {
+                                                    double function_tolerance,
+                                                    std::vector<AdjustedFrame>* frames,
+                                                    int min_frame_observations) {
   if (!(function_tolerance >= 0.0 && function_tolerance < 1.0)) {
     throw std::invalid_argument(
         "Tracker::GlobalBundleAdjust: function_tolerance: expected 0 or a value in (0, 1)");
@@ -1916,6 +1918,32 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double me
     for (const Impl::PointObservation& o : point.observations)
       problem.observations.push_back({o.keyframe, o.camera, index, o.bearing});
   }
+  // The frames: free poses after the keyframes, with their kept observations of the points
+  // adjusted.
+  const size_t num_keyframes = m.keyframes.size();
+  std::vector<int> frame_pose_index;  // per frame: its pose in the problem, -1: left out
+  if (frames != nullptr) {
+    std::vector<int> problem_point(m.points.size(), -1);
+    for (size_t i = 0; i < point_of.size(); ++i) problem_point[point_of[i]] = static_cast<int>(i);
+    std::vector<BundleAdjustmentObservation> seen;
+    for (AdjustedFrame& frame : *frames) {
+      frame.adjusted = false;
+      frame_pose_index.push_back(-1);
+      const auto kept = m.kept_observations.find(frame.frame);
+      if (kept == m.kept_observations.end()) continue;
+      const int pose = static_cast<int>(problem.keyframes.size());
+      seen.clear();
+      for (const Impl::KeptObservation& o : kept->second) {
+        const int p = m.track_to_point.Find(o.track);
+        if (p < 0 || !m.points[p].alive || problem_point[p] < 0) continue;
+        seen.push_back({pose, o.camera, problem_point[p], o.bearing.cast<double>()});
+      }
+      if (static_cast<int>(seen.size()) < min_frame_observations) continue;
+      problem.keyframes.push_back({frame.world_from_rig, false});
+      problem.observations.insert(problem.observations.end(), seen.begin(), seen.end());
+      frame_pose_index.back() = pose;
+    }
+  }
   options.linear_solver = BundleAdjustmentOptions::LinearSolver::kSparseSchur;
   options.num_threads = m.options.global_bundle_adjustment_threads;
   options.function_tolerance = function_tolerance > 0.0
@@ -1925,8 +1953,13 @@ BundleAdjustmentSummary Tracker::GlobalBundleAdjust(bool true_offsets, double me
   const BundleAdjustmentSummary summary = LocalBundleAdjust(m.rig, options, &problem);
   if (!summary.success) return summary;
   // The last tracked frames follow the newest keyframe (see ApplyCorrection).
-  const Rigid3d world_new_from_old =
-      problem.keyframes.back().world_from_rig * m.keyframes.back().world_from_rig.Inverse();
+  const Rigid3d world_new_from_old = problem.keyframes[num_keyframes - 1].world_from_rig *
+                                     m.keyframes.back().world_from_rig.Inverse();
+  for (size_t i = 0; i < frame_pose_index.size(); ++i) {
+    if (frame_pose_index[i] < 0) continue;
+    (*frames)[i].world_from_rig = problem.keyframes[frame_pose_index[i]].world_from_rig;
+    (*frames)[i].adjusted = true;
+  }
   for (Impl::TrackedPose& tracked : m.last_tracked)
     tracked.world_from_rig = world_new_from_old * tracked.world_from_rig;
   for (size_t k = 0; k < m.keyframes.size(); ++k)

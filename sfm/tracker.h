@@ -225,6 +225,17 @@ struct FramePoseRefinementOptions {
   std::string Check() const;
 };
 
+// A tracked frame that is not a keyframe, adjusted with the keyframes and points by
+// Tracker::GlobalBundleAdjust: its index among the frames given to AddFrame, its pose (the
+// start, then the adjusted one) and whether it was adjusted (it needs kept observations,
+// TrackerOptions::keep_frame_observations, of at least min_observations points of the
+// adjustment).
+struct AdjustedFrame {
+  int frame = -1;
+  Rigid3d world_from_rig;
+  bool adjusted = false;
+};
+
 struct FramePoseRefinement {
   bool refined = false;  // false: the starting pose is kept (world_from_rig is that pose)
   Rigid3d world_from_rig;
@@ -377,10 +388,15 @@ class Tracker {
   // and the points that none of the free keyframes observes are left out.
   // `function_tolerance` > 0: the solve stops at this share of the cost instead of
   // TrackerOptions::global_bundle_adjustment_function_tolerance (0).
+  // `frames`: tracked frames adjusted too, each a free pose with its kept observations of the
+  // adjusted points (at least `min_frame_observations` of them, else it is left out): more rays
+  // for every point. Their adjusted poses are written back.
   BundleAdjustmentSummary GlobalBundleAdjust(bool true_offsets = false, double merge_angle = 0.0,
                                              int* points_merged = nullptr,
                                              int first_free_keyframe = 0,
-                                             double function_tolerance = 0.0);
+                                             double function_tolerance = 0.0,
+                                             std::vector<AdjustedFrame>* frames = nullptr,
+                                             int min_frame_observations = 15);
   // The number of keyframes the map had when the last global adjustment succeeded (0: none
   // since the map started).
   int KeyframesAtLastGlobalAdjustment() const;

@@ -89,6 +89,11 @@ TEST(SfmRunnerOptions, FinalAdjustmentFreesTheTailSinceTheLastGlobalAdjustment) 
   options.final_bundle_adjustment_tail_share = 1.5;
   EXPECT_NE(options.Check().find("final_bundle_adjustment_tail_share"), std::string::npos)
       << options.Check();
+  options = SfmRunnerOptions();
+  EXPECT_TRUE(options.final_bundle_adjustment_frames);
+  options.final_bundle_adjustment_frames_max_keyframes = -1;
+  EXPECT_NE(options.Check().find("final_bundle_adjustment_frames_max_keyframes"), std::string::npos)
+      << options.Check();
 }
 
 // The front end's pool of corners: on in both modes by default, off in central mode when

@@ -1039,6 +1039,71 @@ TEST(TrackerGlobalAdjustment, ItsOwnToleranceReplacesTheTrackers) {
 namespace omni {
 namespace {
 
+// Frames between keyframes adjusted with the whole map (GlobalBundleAdjust's frames): each one
+// with enough kept observations is adjusted, from a start 10 cm and 0.3 degrees off its tracked
+// pose back to within 1 % of the length of the truth (after the keyframes' similarity), and
+// closer than it started; a frame with no kept observations, or asked for more than it has, is
+// left out and keeps its pose.
+TEST(TrackerGlobalAdjustment, FramesBetweenKeyframesAreAdjustedWithTheMap) {
+  const SyntheticDrive drive = MakeDrive(0.3, 60, 0.0005, 0.03);
+  TrackerOptions options;
+  options.central = false;
+  options.keep_frame_observations = true;
+  Tracker tracker(drive.rig, options);
+  std::vector<Rigid3d> tracked;
+  for (const std::vector<TrackObservation>& frame : drive.frames)
+    tracked.push_back(tracker.AddFrame(frame).world_from_rig);
+  tracker.Finish();
+  const std::vector<int> keyframe_frames = tracker.KeyframeFrames();
+  std::vector<AdjustedFrame> frames;
+  const Eigen::Quaterniond turn(Eigen::AngleAxisd(0.3 * M_PI / 180.0, Eigen::Vector3d::UnitZ()));
+  for (int f = 0; f < static_cast<int>(drive.frames.size()); ++f) {
+    if (std::count(keyframe_frames.begin(), keyframe_frames.end(), f)) continue;
+    frames.push_back({f, Rigid3d(turn * tracked[f].rotation,
+                                 tracked[f].translation + Eigen::Vector3d(0.1, 0, 0))});
+  }
+  ASSERT_GE(frames.size(), 20u);
+  frames.push_back({1000, tracked.back()});  // never given to AddFrame: no observations
+  const std::vector<AdjustedFrame> start = frames;
+  ASSERT_TRUE(tracker.GlobalBundleAdjust(false, 0.0, nullptr, 0, 0.0, &frames).success);
+  EXPECT_FALSE(frames.back().adjusted);
+  EXPECT_EQ(frames.back().world_from_rig.translation, start.back().world_from_rig.translation);
+  frames.pop_back();
+
+  // The keyframes' similarity to the truth carries the frames.
+  std::vector<Eigen::Vector3d> estimated, truth;
+  const std::vector<Rigid3d> keyframe_poses = tracker.KeyframePoses();
+  for (size_t k = 0; k < keyframe_poses.size(); ++k) {
+    estimated.push_back(keyframe_poses[k].translation);
+    truth.push_back(drive.world_from_rig[keyframe_frames[k]].translation);
+  }
+  const Sim3d truth_from_estimated = EstimateSim3Umeyama(estimated, truth, true);
+  int adjusted = 0;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    if (!frames[i].adjusted) continue;
+    ++adjusted;
+    const Eigen::Vector3d true_centre = drive.world_from_rig[frames[i].frame].translation;
+    const double error =
+        (truth_from_estimated * frames[i].world_from_rig.translation - true_centre).norm();
+    const double error_before =
+        (truth_from_estimated * start[i].world_from_rig.translation - true_centre).norm();
+    EXPECT_LT(error, 0.01 * drive.length) << "frame " << frames[i].frame;
+    EXPECT_LT(error, error_before) << "frame " << frames[i].frame;
+  }
+  EXPECT_GE(adjusted, static_cast<int>(0.9 * frames.size()));
+
+  // More observations asked for than any frame has: none is adjusted.
+  std::vector<AdjustedFrame> demanding = start;
+  ASSERT_TRUE(tracker.GlobalBundleAdjust(false, 0.0, nullptr, 0, 0.0, &demanding, 1000000).success);
+  for (const AdjustedFrame& frame : demanding) EXPECT_FALSE(frame.adjusted);
+}
+
+}  // namespace
+}  // namespace omni
+
+namespace omni {
+namespace {
+
 // The resection's consensus: 0 picks by mode (three times the angle in non-central mode, one
 // angle in central mode, figures.md F52), an explicit factor applies in either mode, and a
 // factor below 1 (a consensus narrower than the inliers) or NaN is refused.

@@ -228,7 +228,7 @@ struct FramePoseRefinementOptions {
 // A tracked frame that is not a keyframe, adjusted with the keyframes and points by
 // Tracker::GlobalBundleAdjust: its index among the frames given to AddFrame, its pose (the
 // start, then the adjusted one) and whether it was adjusted (it needs kept observations,
-// TrackerOptions::keep_frame_observations, of at least min_observations points of the
+// TrackerOptions::keep_frame_observations, of at least min_frame_observations points of the
 // adjustment).
 struct AdjustedFrame {
   int frame = -1;

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # COLMAP 3.8 (the Debian package `colmap`, no CUDA) on frames of a drive: the offline peer the
 # SfM's poses are measured against (docs/figures.md F33, F76). One thread throughout, so that a
-# run leaves the other core to the machine; 12 to 21 minutes for 60 frames of six 384x512
+# run leaves the other core to the machine; 12 to 22 minutes for 60 frames of six 384x512
 # cameras.
 #
 # usage: scripts/colmap_baseline.sh DRIVE FIRST COUNT OUT

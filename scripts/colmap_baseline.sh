@@ -7,7 +7,7 @@
 # usage: scripts/colmap_baseline.sh DRIVE FIRST COUNT OUT
 #
 # Images of frames FIRST .. FIRST+COUNT-1 (indices in the drive's frame order), linked into
-# OUT/images as f<frame>_c<camera>.png (the names scripts/sfm_vs_colmap.py reads); each camera's
+# OUT/images as f<frame>_c<camera>.png or .jpg (the names scripts/sfm_vs_colmap.py reads); each camera's
 # pinhole intrinsics from rig.json, fixed in the adjustment (COLMAP's pixel centres are +0.5
 # from ours). The image pairs matched: each camera with itself 1, 2, 3 and 5 frames on, and with
 # every camera whose field of view may overlap its own (optical axes closer than the sum of
@@ -44,21 +44,31 @@ for c in cameras:
     if c.get('model') != 'pinhole':
         fail(f"{drive}/rig.json: camera {c['name']} is {c.get('model')}, only pinhole cameras "
              f"are set up")
-frames = sorted(os.path.splitext(n)[0] for n in os.listdir(
-    os.path.join(drive, 'images', cameras[0]['name'])) if n.endswith(('.png', '.jpg', '.jpeg')))
+first_folder = os.path.join(drive, 'images', cameras[0]['name'])
+if not os.path.isdir(first_folder):
+    fail(f'{first_folder}: not a folder of images')
+frames = sorted(os.path.splitext(n)[0] for n in os.listdir(first_folder)
+                if n.endswith(('.png', '.jpg', '.jpeg')))
 if first < 0 or count < 2 or first + count > len(frames):
     fail(f'frames {first}..{first + count - 1} outside the drive\'s {len(frames)} frames')
 frames = frames[first:first + count]
 
+names = {}  # (frame index, camera) -> the link's name, with its source's extension
+
+
 def name(f, c):
-    return f'f{frames[f]}_c{c}.png'
+    return names[(f, c)]
+
 
 for c, cam in enumerate(cameras):
     folder = os.path.join(drive, 'images', cam['name'])
     with open(os.path.join(out, f'list_c{c}.txt'), 'w') as lst:
         for f, frame in enumerate(frames):
-            source = next(os.path.join(folder, frame + e) for e in ('.png', '.jpg', '.jpeg')
-                          if os.path.exists(os.path.join(folder, frame + e)))
+            source = next((os.path.join(folder, frame + e) for e in ('.png', '.jpg', '.jpeg')
+                           if os.path.exists(os.path.join(folder, frame + e))), None)
+            if source is None:
+                fail(f'{folder}: no image {frame}.png or .jpg')
+            names[(f, c)] = f'f{frame}_c{c}{os.path.splitext(source)[1]}'
             os.symlink(os.path.abspath(source), os.path.join(out, 'images', name(f, c)))
             lst.write(name(f, c) + '\n')
     fx, fy, cx, cy = cam['params'][:4]

@@ -7,12 +7,12 @@
 # usage: scripts/colmap_baseline.sh DRIVE FIRST COUNT OUT
 #
 # Images of frames FIRST .. FIRST+COUNT-1 (indices in the drive's frame order), linked into
-# OUT/images as f<frame>_c<camera>.png or .jpg (the names scripts/sfm_vs_colmap.py reads); each camera's
-# pinhole intrinsics from rig.json, fixed in the adjustment (COLMAP's pixel centres are +0.5
-# from ours). The image pairs matched: each camera with itself 1, 2, 3 and 5 frames on, and with
-# every camera whose field of view may overlap its own (optical axes closer than the sum of
-# their half horizontal fields of view) 1 and 2 frames on. The model is written as text in
-# OUT/model; compare with
+# OUT/images as f<frame>_c<camera>.png or .jpg (the names scripts/sfm_vs_colmap.py reads);
+# each camera's pinhole intrinsics from rig.json, fixed in the adjustment (COLMAP's pixel
+# centres are +0.5 from ours). The image pairs matched: each camera with itself 1, 2, 3 and 5
+# frames on, and with every camera whose field of view may overlap its own (optical axes closer
+# than the sum of their half horizontal fields of view) 1 and 2 frames on. The model is written
+# as text in OUT/model; compare with
 #   python3 scripts/sfm_vs_colmap.py DRIVE OUT/model OURS/poses.tum
 # Only pinhole rigs; OUT must not exist.
 set -euo pipefail
@@ -21,9 +21,15 @@ if [ $# -ne 4 ]; then
   exit 2
 fi
 drive="$1" first="$2" count="$3" out="$4"
-command -v colmap > /dev/null || { echo "colmap_baseline.sh: colmap not found (apt-get install colmap)" >&2; exit 2; }
-[ -f "$drive/rig.json" ] || { echo "colmap_baseline.sh: $drive/rig.json: not found" >&2; exit 2; }
-[ -e "$out" ] && { echo "colmap_baseline.sh: $out: exists (give a new folder)" >&2; exit 2; }
+refuse() {
+  echo "colmap_baseline.sh: $1" >&2
+  exit 2
+}
+[[ "$first" =~ ^[0-9]+$ && "$count" =~ ^[0-9]+$ ]] ||
+  refuse "FIRST and COUNT: expected frame counts, got '$first' '$count'"
+command -v colmap > /dev/null || refuse "colmap not found (apt-get install colmap)"
+[ -f "$drive/rig.json" ] || refuse "$drive/rig.json: not found"
+[ -e "$out" ] && refuse "$out: exists (give a new folder)"
 mkdir -p "$out/images" "$out/sparse" "$out/model"
 
 # Links, per-camera image lists and intrinsics, and the pair list (OUT removed again when the

@@ -177,6 +177,13 @@ struct SfmRunner::Impl {
                ? static_cast<int>(input_frames[tracker_frame])
                : tracker_frame;
   }
+  // The inverse: the tracker's index of an input frame, −1 when it was not given to the tracker.
+  int TrackerFrame(size_t frame) const {
+    const auto given = std::lower_bound(input_frames.begin(), input_frames.end(), frame);
+    return given != input_frames.end() && *given == frame
+               ? static_cast<int>(given - input_frames.begin())
+               : -1;
+  }
 
   // The row's pose relative to keyframe `keyframe` (none when the tracker has no such
   // keyframe).
@@ -273,12 +280,11 @@ struct SfmRunner::Impl {
       if (row.pose_adjusted) continue;  // adjusted with the final map (final_adjusted_frames)
       row.pose_refined = false;
       if (!row.result.tracked || row.result.keyframe) continue;
-      const auto given = std::lower_bound(input_frames.begin(), input_frames.end(), row.frame);
-      if (given == input_frames.end() || *given != row.frame) continue;
+      const int tracker_frame = TrackerFrame(row.frame);
+      if (tracker_frame < 0) continue;
       ++result.frames_refinement_tried;
       const FramePoseRefinement refinement = tracker.RefineFramePose(
-          static_cast<int>(given - input_frames.begin()), BlendedFramePose(result, row),
-          options.final_frame_refinement_checks);
+          tracker_frame, BlendedFramePose(result, row), options.final_frame_refinement_checks);
       if (!refinement.refined) continue;
       row.pose_refined = true;
       row.refined_world_from_rig = refinement.world_from_rig;
@@ -466,11 +472,9 @@ SfmRunResult SfmRunner::Finish() {
         const SfmFrameRow& row = result.frames[r];
         if (!row.result.tracked || row.result.keyframe || row.reference_keyframe < first_free)
           continue;
-        const auto given =
-            std::lower_bound(s.input_frames.begin(), s.input_frames.end(), row.frame);
-        if (given == s.input_frames.end() || *given != row.frame) continue;
-        frames.push_back(
-            {static_cast<int>(given - s.input_frames.begin()), BlendedFramePose(result, row)});
+        const int tracker_frame = s.TrackerFrame(row.frame);
+        if (tracker_frame < 0) continue;
+        frames.push_back({tracker_frame, BlendedFramePose(result, row)});
         frame_rows.push_back(r);
       }
     }

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <map>
+#include <memory>
 #include <random>
 #include <set>
 
@@ -1006,6 +1007,19 @@ TEST(TrackerGlobalAdjustment, ATailAdjustmentMovesOnlyTheKeyframesFromTheFirstFr
 namespace omni {
 namespace {
 
+// A tracker that has tracked every frame of the drive and finished; *tracked, if given, receives
+// each frame's tracked pose.
+std::unique_ptr<Tracker> TrackWholeDrive(const SyntheticDrive& drive, const TrackerOptions& options,
+                                         std::vector<Rigid3d>* tracked = nullptr) {
+  auto tracker = std::make_unique<Tracker>(drive.rig, options);
+  for (const std::vector<TrackObservation>& frame : drive.frames) {
+    const Rigid3d world_from_rig = tracker->AddFrame(frame).world_from_rig;
+    if (tracked != nullptr) tracked->push_back(world_from_rig);
+  }
+  tracker->Finish();
+  return tracker;
+}
+
 // A global adjustment's own stopping tolerance (the loop closer's) replaces the tracker's: on
 // one map, a loose one stops in fewer iterations than a tight one, both lower the RMS angle, and
 // a tolerance outside [0, 1) is refused.
@@ -1014,10 +1028,8 @@ TEST(TrackerGlobalAdjustment, ItsOwnToleranceReplacesTheTrackers) {
   TrackerOptions options;
   options.central = false;
   auto adjusted = [&](double function_tolerance) {
-    Tracker tracker(drive.rig, options);
-    for (const std::vector<TrackObservation>& frame : drive.frames) tracker.AddFrame(frame);
-    tracker.Finish();
-    return tracker.GlobalBundleAdjust(false, 0.0, nullptr, 0, function_tolerance);
+    return TrackWholeDrive(drive, options)
+        ->GlobalBundleAdjust(false, 0.0, nullptr, 0, function_tolerance);
   };
   const BundleAdjustmentSummary tight = adjusted(1e-12);
   const BundleAdjustmentSummary loose = adjusted(0.5);
@@ -1033,12 +1045,6 @@ TEST(TrackerGlobalAdjustment, ItsOwnToleranceReplacesTheTrackers) {
   }
 }
 
-}  // namespace
-}  // namespace omni
-
-namespace omni {
-namespace {
-
 // Frames between keyframes adjusted with the whole map (GlobalBundleAdjust's frames): each one
 // with enough kept observations is adjusted, from a start 10 cm and 0.3 degrees off its tracked
 // pose back to within 1 % of the length of the truth (after the keyframes' similarity), and
@@ -1049,11 +1055,9 @@ TEST(TrackerGlobalAdjustment, FramesBetweenKeyframesAreAdjustedWithTheMap) {
   TrackerOptions options;
   options.central = false;
   options.keep_frame_observations = true;
-  Tracker tracker(drive.rig, options);
   std::vector<Rigid3d> tracked;
-  for (const std::vector<TrackObservation>& frame : drive.frames)
-    tracked.push_back(tracker.AddFrame(frame).world_from_rig);
-  tracker.Finish();
+  const std::unique_ptr<Tracker> tracked_drive = TrackWholeDrive(drive, options, &tracked);
+  Tracker& tracker = *tracked_drive;
   const std::vector<int> keyframe_frames = tracker.KeyframeFrames();
   std::vector<AdjustedFrame> frames;
   const Eigen::Quaterniond turn(Eigen::AngleAxisd(0.3 * M_PI / 180.0, Eigen::Vector3d::UnitZ()));

@@ -80,6 +80,8 @@ std::string TrackerOptions::Check() const {
         global_bundle_adjustment_function_tolerance < 1.0))
     return "global_bundle_adjustment_function_tolerance: expected a value in (0, 1)";
   if (min_init_points < 5) return "min_init_points: expected at least 5";
+  if (!(min_init_track_share >= 0.0 && min_init_track_share < 1.0))
+    return "min_init_track_share: expected a share in [0, 1)";
   if (max_init_frames < 1) return "max_init_frames: expected at least 1";
   if (min_stereo_points < 5) return "min_stereo_points: expected at least 5";
   if (min_stereo_scale_points < 3) return "min_stereo_scale_points: expected at least 3";
@@ -481,6 +483,12 @@ FrameResult Tracker::Impl::Initialise(const std::vector<TrackObservation>& obser
     index1.push_back(static_cast<int>(j));
   }
   if (static_cast<int>(bearings0.size()) < options.min_init_points) return result;
+  if (!retrying &&
+      static_cast<double>(bearings0.size()) <
+          options.min_init_track_share * static_cast<double>(keyframe0.observations.size())) {
+    result.status = "initialising (few of the first keyframe's tracks followed)";
+    return result;
+  }
 
   // Candidate poses of the second keyframe: the central five-point solution (unit baseline;
   // on rig-axis bearings), and in non-central mode also the generalised solution (metric

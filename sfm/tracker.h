@@ -55,6 +55,13 @@ struct TrackerOptions {
   // one only when it triangulates this many times as many points.
   double noncentral_init_margin = 1.2;
   int min_init_points = 50;  // points triangulated for the initialisation to be accepted
+  // A two-frame initialisation from the front end's matches (not from a retry by descriptors)
+  // needs at least this share of the first keyframe's observations tracked to the frame: when
+  // the search without a motion prior lost most of them (a turn, fast flow at the image's edges
+  // in a forward camera), the pose of what little it matched was wrong by metres on a single
+  // camera's starts, and the frame is left to the descriptors' retry. Good first pairs keep 0.4
+  // or more with one camera, 0.25 or more with six (docs/figures.md F79). 0: off.
+  double min_init_track_share = 0.15;
   // The initialisation starts again from the current frame (a new first keyframe) when this
   // many frames after the first keyframe could not initialise (a bad first frame, a rig that
   // does not move), or at once when the first keyframe has fewer than min_init_points

@@ -832,6 +832,10 @@ TEST(Tracker, BadOptionsThrowNamingTheField) {
   EXPECT_TRUE(testing::ThrowsOptionsError([&] { Tracker tracker(rig, options); },
                                           "TrackerOptions.num_free_keyframes"));
   options = TrackerOptions();
+  options.min_init_track_share = 1.0;
+  EXPECT_TRUE(testing::ThrowsOptionsError([&] { Tracker tracker(rig, options); },
+                                          "TrackerOptions.min_init_track_share"));
+  options = TrackerOptions();
   options.frame_ray_step = -1;
   EXPECT_TRUE(testing::ThrowsOptionsError([&] { Tracker tracker(rig, options); },
                                           "TrackerOptions.frame_ray_step"));
@@ -876,6 +880,43 @@ TEST(TrackerInitialisation, ResectsTheFramesReadWhileInitialisingAndRestartsAfte
     EXPECT_EQ(results[f].status, "resected once the map existed");
   const Sim3d truth_from_estimated = EstimateSim3Umeyama(estimated, truth, true);
   EXPECT_LT(AlignmentRms(truth_from_estimated, estimated, truth), 0.01 * drive.length);
+}
+
+// A second frame that keeps only a small share of the first keyframe's tracks (the front end's
+// search lost most of them) does not start the map, though its tracks would give a pose; the
+// same frame with the share allowed, or with all its tracks, does.
+TEST(TrackerInitialisation, AFrameThatKeepsFewOfTheFirstKeyframesTracksIsLeftToTheRetry) {
+  const SyntheticDrive drive = MakeDrive(0.05, 30, 0.0003, 0.0);
+  constexpr int kSecond = 8;  // 1.2 m from frame 0: parallax enough
+  std::set<int> first_tracks;
+  for (const TrackObservation& o : drive.frames[0]) first_tracks.insert(o.track);
+  // Every other common track kept: half of the common ones.
+  std::vector<TrackObservation> thinned;
+  int common = 0;
+  for (const TrackObservation& o : drive.frames[kSecond]) {
+    if (!first_tracks.count(o.track)) continue;
+    if (common++ % 2 == 0) thinned.push_back(o);
+  }
+  const double share =
+      static_cast<double>(thinned.size()) / static_cast<double>(drive.frames[0].size());
+  TrackerOptions options;
+  ASSERT_GE(static_cast<int>(thinned.size()), 2 * options.min_init_points);
+  ASSERT_LT(share, 0.5);
+  auto initialise = [&](double min_share, const std::vector<TrackObservation>& second) {
+    TrackerOptions o = options;
+    o.min_init_track_share = min_share;
+    Tracker tracker(drive.rig, o);
+    tracker.AddFrame(drive.frames[0]);
+    const FrameResult result = tracker.AddFrame(second);
+    return std::make_pair(tracker.Initialised(), result.status);
+  };
+  const auto refused = initialise(share + 0.05, thinned);
+  EXPECT_FALSE(refused.first);
+  EXPECT_NE(refused.second.find("few of the first keyframe's tracks"), std::string::npos)
+      << refused.second;
+  EXPECT_TRUE(initialise(share - 0.05, thinned).first);
+  EXPECT_TRUE(initialise(0.0, thinned).first);
+  EXPECT_TRUE(initialise(share + 0.05, drive.frames[kSecond]).first);
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -216,6 +217,24 @@ void RegisterEval(CLI::App& app) {
         "pixel tail above %.2f m: %.1f %% of both hits (in front %.1f %%, behind %.1f %%)\n",
         r.pixel_tail_error, 100.0 * r.pixel.tail, 100.0 * r.pixel.tail_front,
         100.0 * r.pixel.tail_behind);
+    if (!r.pixel_labels.empty() && r.pixel.tail_behind_count > 0) {
+      // What the pixels behind the truth should have hit, the largest shares first.
+      std::vector<const PixelScores*> by_behind;
+      for (const PixelScores& p : r.pixel_labels) {
+        if (p.tail_behind_count > 0) by_behind.push_back(&p);
+      }
+      std::sort(by_behind.begin(), by_behind.end(), [](const PixelScores* a, const PixelScores* b) {
+        return a->tail_behind_count > b->tail_behind_count;
+      });
+      std::printf("behind the truth, what the true ray hits:");
+      for (size_t i = 0; i < std::min<size_t>(by_behind.size(), 5); ++i) {
+        std::printf("%s %s %.0f %% (%.0f %% of its both-hit pixels)", i == 0 ? "" : ",",
+                    by_behind[i]->label.c_str(),
+                    100.0 * by_behind[i]->tail_behind_count / r.pixel.tail_behind_count,
+                    100.0 * by_behind[i]->tail_behind);
+      }
+      std::printf("\n");
+    }
     if (summary.has_closed) {
       const RayErrorResult& c = summary.closed_ray_errors;
       std::printf("surface_closed.ply: q90 %.0f cm, above 600 cm %.1f %%, pixel F-score",

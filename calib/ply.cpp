@@ -371,6 +371,7 @@ struct PlyContent {
   std::vector<Eigen::Vector3d> vertices;
   std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;
   std::vector<Eigen::Vector3i> triangles;
+  std::vector<uint8_t> labels;  // one per triangle when the faces have a label
 };
 
 uint8_t ToColorByte(double value, PlyType type) {
@@ -415,7 +416,7 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
   for (const PlyElement& element : header.elements) {
     reader.SetElement(element.name);
     const bool is_vertex = &element == vertex_element;
-    std::optional<size_t> indices_property;
+    std::optional<size_t> indices_property, label_property;
     if (read_faces && element.name == "face") {
       indices_property = element.Find("vertex_indices");
       if (!indices_property) indices_property = element.Find("vertex_index");
@@ -423,6 +424,11 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
           !IsIntegerType(element.properties[*indices_property].type)) {
         throw InputError(path, "element face",
                          "no integer list property vertex_indices or vertex_index");
+      }
+      label_property = element.Find("label");
+      if (label_property && (element.properties[*label_property].is_list ||
+                             !IsIntegerType(element.properties[*label_property].type))) {
+        throw InputError(path, "element face", "property label is not a scalar integer");
       }
     }
     if (!is_vertex && !indices_property) {
@@ -475,6 +481,16 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
             content.triangles.emplace_back(polygon[0], polygon[k], polygon[k + 1]);
           }
         }
+      }
+      if (label_property) {
+        // Read after the whole row: the property may come before or after the indices.
+        const double label = row[*label_property];
+        if (!(label >= 0.0 && label <= 255.0)) {
+          std::ostringstream problem;
+          problem << "face " << item << ": label " << label << " out of range [0, 255]";
+          reader.Fail(problem.str());
+        }
+        content.labels.resize(content.triangles.size(), static_cast<uint8_t>(label));
       }
       if (is_vertex) {
         const Eigen::Vector3d vertex(row[xyz[0]], row[xyz[1]], row[xyz[2]]);
@@ -533,6 +549,7 @@ TriangleMesh ParsePlyMesh(const std::string& data, const std::filesystem::path& 
   mesh.vertices = std::move(content.vertices);
   mesh.triangles = std::move(content.triangles);
   mesh.colors = std::move(content.colors);
+  mesh.labels = std::move(content.labels);
   return mesh;
 }
 
@@ -551,24 +568,33 @@ void WritePlyMesh(const TriangleMesh& mesh, const std::filesystem::path& path) {
                                 " colours for " + std::to_string(mesh.vertices.size()) +
                                 " vertices");
   }
+  const bool has_labels = !mesh.labels.empty();
+  if (has_labels && mesh.labels.size() != mesh.triangles.size()) {
+    throw std::invalid_argument("WritePlyMesh: " + std::to_string(mesh.labels.size()) +
+                                " labels for " + std::to_string(mesh.triangles.size()) +
+                                " triangles");
+  }
   std::string out;
   out += "ply\nformat binary_little_endian 1.0\ncomment written by omnisculpt\n";
   out += "element vertex " + std::to_string(mesh.vertices.size()) + "\n";
   out += "property float x\nproperty float y\nproperty float z\n";
   if (has_colors) out += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
   out += "element face " + std::to_string(mesh.triangles.size()) + "\n";
-  out += "property list uchar int vertex_indices\nend_header\n";
+  out += "property list uchar int vertex_indices\n";
+  if (has_labels) out += "property uchar label\n";
+  out += "end_header\n";
   out.reserve(out.size() + mesh.vertices.size() * (has_colors ? 15 : 12) +
-              mesh.triangles.size() * 13);
+              mesh.triangles.size() * (has_labels ? 14 : 13));
   for (size_t i = 0; i < mesh.vertices.size(); ++i) {
     PutVertex(mesh.vertices[i], &out);
     if (has_colors) {
       for (int c = 0; c < 3; ++c) PutLittleEndian(mesh.colors[i][c], &out);
     }
   }
-  for (const Eigen::Vector3i& triangle : mesh.triangles) {
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
     PutLittleEndian(static_cast<uint8_t>(3), &out);
-    for (int k = 0; k < 3; ++k) PutLittleEndian(static_cast<int32_t>(triangle[k]), &out);
+    for (int k = 0; k < 3; ++k) PutLittleEndian(static_cast<int32_t>(mesh.triangles[t][k]), &out);
+    if (has_labels) PutLittleEndian(mesh.labels[t], &out);
   }
   WriteFileAtomically(
       path, [&](std::ostream& stream) { stream.write(out.data(), out.size()); }, true);

@@ -84,6 +84,14 @@ TriangleMesh MakeTorus(double major_radius, double minor_radius, int major_steps
 }
 
 void AppendMesh(const TriangleMesh& part, TriangleMesh* mesh) {
+  // Labels stay one per triangle: appended when both have them, else none.
+  if (mesh->triangles.empty()) {
+    mesh->labels = part.labels;
+  } else if (!mesh->labels.empty() && !part.labels.empty()) {
+    mesh->labels.insert(mesh->labels.end(), part.labels.begin(), part.labels.end());
+  } else {
+    mesh->labels.clear();
+  }
   const int offset = static_cast<int>(mesh->vertices.size());
   mesh->vertices.insert(mesh->vertices.end(), part.vertices.begin(), part.vertices.end());
   for (const auto& tri : part.triangles) {
@@ -107,6 +115,7 @@ TriangleMesh WeldVertices(const TriangleMesh& mesh) {
   for (const auto& tri : mesh.triangles) {
     welded.triangles.emplace_back(new_index[tri[0]], new_index[tri[1]], new_index[tri[2]]);
   }
+  welded.labels = mesh.labels;
   return welded;
 }
 

@@ -15,9 +15,11 @@ TriangleMesh MakeBox(const Eigen::Vector3d& min_corner, const Eigen::Vector3d& m
 TriangleMesh MakeIcosphere(const Eigen::Vector3d& center, double radius, int subdivisions);
 // Torus around the z axis: major radius R, minor radius r, n x m quads split in two.
 TriangleMesh MakeTorus(double major_radius, double minor_radius, int major_steps, int minor_steps);
-// Appends `part` to `mesh` (no vertex welding).
+// Appends `part` to `mesh` (no vertex welding); the labels are appended when both meshes have
+// them (or `mesh` has no triangle yet), else dropped.
 void AppendMesh(const TriangleMesh& part, TriangleMesh* mesh);
-// Merges vertices at exactly the same position (first one kept), renumbering triangles.
+// Merges vertices at exactly the same position (first one kept), renumbering triangles (their
+// labels kept; the colours dropped).
 TriangleMesh WeldVertices(const TriangleMesh& mesh);
 // Reverses every triangle (the inside becomes the outside: a box becomes a room).
 TriangleMesh FlipOrientation(const TriangleMesh& mesh);

@@ -64,6 +64,7 @@ nlohmann::json PixelScoresJson(const PixelScores& p) {
                          {"tail_front_count", p.tail_front_count},
                          {"tail_behind_count", p.tail_behind_count}};
   if (!p.camera.empty()) json["camera"] = p.camera;
+  if (!p.label.empty()) json["label"] = p.label;
   return json;
 }
 
@@ -87,6 +88,11 @@ nlohmann::json PixelJson(const RayErrorResult& r) {
   json["cameras"] = nlohmann::json::array();
   for (const PixelScores& camera : r.pixel_cameras)
     json["cameras"].push_back(PixelScoresJson(camera));
+  if (!r.pixel_labels.empty()) {
+    json["labels"] = nlohmann::json::array();
+    for (const PixelScores& label : r.pixel_labels)
+      json["labels"].push_back(PixelScoresJson(label));
+  }
   return json;
 }
 
@@ -340,6 +346,25 @@ double NumberOr(const nlohmann::json& object, const char* key) {
                                                : std::numeric_limits<double>::quiet_NaN();
 }
 
+// The names of the ground truth's triangle labels (gt/scene.json "mesh_labels", written by
+// synth); empty, with a warning, when the file or the list is missing or unreadable.
+std::vector<std::string> ReadLabelNames(const fs::path& drive, std::vector<std::string>* warnings) {
+  const fs::path path = drive / "gt" / "scene.json";
+  std::vector<std::string> names;
+  try {
+    std::ifstream in(path);
+    const nlohmann::json json = nlohmann::json::parse(in);
+    for (const nlohmann::json& name : json.at("mesh_labels"))
+      names.push_back(name.get<std::string>());
+  } catch (const std::exception&) {
+    warnings->push_back(path.string() +
+                        ": no list of names for gt/mesh.ply's labels (mesh_labels); labels named "
+                        "by number");
+    names.clear();
+  }
+  return names;
+}
+
 }  // namespace
 
 EvalPipeline ReadEvalPipeline(const fs::path& rec) {
@@ -448,8 +473,15 @@ EvalSummary RunEvaluation(const fs::path& drive, const fs::path& rec, const fs::
     keyframes.push_back({m.registered_world_from_rig, m.gt_world_from_rig});
     gt_keyframes.push_back(m.gt_world_from_rig);
   }
+  // The ground truth's triangles by kind of surface (a synth drive's poles, cars, walls...): the
+  // pixel figures per kind.
+  GtLabels labels;
+  if (!gt_mesh.labels.empty()) {
+    labels.per_triangle = gt_mesh.labels;
+    labels.names = ReadLabelNames(drive, &summary.warnings);
+  }
   summary.ray_errors =
-      EvaluateRayErrors(rig, keyframes, estimated_caster, gt_caster, options.ray_errors);
+      EvaluateRayErrors(rig, keyframes, estimated_caster, gt_caster, options.ray_errors, labels);
   spdlog::info("ray-traced error: {} pixels, both hits {:.1f} %, median {:.3f} m",
                summary.ray_errors.rays, 100.0 * summary.ray_errors.share_both_hit,
                summary.ray_errors.errors.median);
@@ -608,6 +640,30 @@ std::string EvalSummaryToJson(const EvalSummary& s) {
 
 namespace {
 
+// The pixel figures by what the ground-truth ray hits (the labels of gt/mesh.ply's triangles).
+void LabelsMarkdown(const RayErrorResult& r, std::ostringstream& md) {
+  long behind_total = 0;
+  for (const PixelScores& p : r.pixel_labels) behind_total += p.tail_behind_count;
+  md << "\nBy what the ground-truth ray hits (gt/mesh.ply's labels): of the pixels whose "
+        "ground-truth hit is on such triangles, the recall, the tail as a share of those with "
+        "both hits, and the label's share of all the pixels behind the truth.\n\n"
+     << "| hits | ground-truth hits | both hits |";
+  for (const PixelPrecisionRecall& x : r.pixel.precision_recall) {
+    md << " R at " << Cm(x.threshold) << " cm |";
+  }
+  md << " tail | in front | behind | of all behind |\n|---|---|---|";
+  for (size_t i = 0; i < r.pixel.precision_recall.size(); ++i) md << "---|";
+  md << "---|---|---|---|\n";
+  for (const PixelScores& p : r.pixel_labels) {
+    md << "| " << p.label << " | " << p.gt_hits << " | " << p.both_hits << " |";
+    for (const PixelPrecisionRecall& x : p.precision_recall)
+      md << " " << Fixed(x.recall, 3) << " |";
+    md << " " << Fixed(100.0 * p.tail, 1) << " % | " << Fixed(100.0 * p.tail_front, 1) << " % | "
+       << Fixed(100.0 * p.tail_behind, 1) << " % | "
+       << Fixed(behind_total > 0 ? 100.0 * p.tail_behind_count / behind_total : 0.0, 1) << " % |\n";
+  }
+}
+
 // The observed surface (surface.ply) beside the closed δO (surface_closed.ply).
 void ClosedSurfaceMarkdown(const EvalSummary& s, std::ostringstream& md) {
   const RayErrorResult &o = s.ray_errors, &c = s.closed_ray_errors;
@@ -752,6 +808,7 @@ std::string EvalSummaryToMarkdown(const EvalSummary& s) {
   };
   for (const PixelScores& camera : r.pixel_cameras) pixel_row(camera.camera, camera);
   pixel_row("**all**", r.pixel);
+  if (!r.pixel_labels.empty()) LabelsMarkdown(r, md);
   if (s.has_closed) ClosedSurfaceMarkdown(s, md);
   if (s.pipeline.present) {
     const EvalPipeline& pl = s.pipeline;

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <stdexcept>
+#include <string>
 #include <unordered_set>
 #include <utility>
 
@@ -187,7 +189,7 @@ std::vector<Eigen::Vector3d> SampleSurface(const TriangleMesh& mesh, long count,
 
 RayErrorResult EvaluateRayErrors(const Rig& rig, const std::vector<KeyframePoses>& keyframes,
                                  const RayCaster& estimated_surface, const RayCaster& gt_surface,
-                                 const RayErrorOptions& options) {
+                                 const RayErrorOptions& options, const GtLabels& labels) {
   if (const std::string problem = options.Check(); !problem.empty()) {
     throw InputError("", "ray error options", problem);
   }
@@ -222,6 +224,11 @@ RayErrorResult EvaluateRayErrors(const Rig& rig, const std::vector<KeyframePoses
   for (const Camera& camera : rig.cameras) {
     result.pixel_cameras.push_back(EmptyPixelScores(camera.name, options.pixel_thresholds));
   }
+  // Per label, indexed by the label (at most 256), made when named or first met.
+  std::vector<PixelScores> label_scores(labels.per_triangle.empty() ? 0 : 256,
+                                        EmptyPixelScores("", options.pixel_thresholds));
+  std::vector<bool> label_used(256, false);
+  for (size_t l = 0; l < std::min<size_t>(labels.names.size(), 256); ++l) label_used[l] = true;
   std::vector<double> errors;
   for (size_t i = 0; i < gt_rays.size(); ++i) {
     const bool estimated_hit = estimated_hits[i].Hit();
@@ -241,9 +248,29 @@ RayErrorResult EvaluateRayErrors(const Rig& rig, const std::vector<KeyframePoses
     AddPixel(estimated_hit, gt_hit, error, in_front, options, &result.pixel);
     AddPixel(estimated_hit, gt_hit, error, in_front, options,
              &result.pixel_cameras[ray_cameras[i]]);
+    if (gt_hit && !labels.per_triangle.empty()) {
+      const size_t triangle = static_cast<size_t>(gt_hits[i].triangle);
+      if (triangle >= labels.per_triangle.size()) {
+        throw std::invalid_argument("EvaluateRayErrors: ground-truth triangle " +
+                                    std::to_string(triangle) + " has no label (" +
+                                    std::to_string(labels.per_triangle.size()) + " labels)");
+      }
+      const uint8_t label = labels.per_triangle[triangle];
+      label_used[label] = true;
+      AddPixel(estimated_hit, gt_hit, error, in_front, options, &label_scores[label]);
+    }
   }
   FinishPixelScores(&result.pixel);
   for (PixelScores& scores : result.pixel_cameras) FinishPixelScores(&scores);
+  if (!labels.per_triangle.empty()) {
+    for (size_t l = 0; l < label_scores.size(); ++l) {
+      if (!label_used[l]) continue;
+      PixelScores& scores = label_scores[l];
+      scores.label = l < labels.names.size() ? labels.names[l] : "label " + std::to_string(l);
+      FinishPixelScores(&scores);
+      result.pixel_labels.push_back(std::move(scores));
+    }
+  }
   if (result.rays > 0) {
     result.share_estimated_hit = static_cast<double>(result.estimated_hits) / result.rays;
     result.share_gt_hit = static_cast<double>(result.gt_hits) / result.rays;

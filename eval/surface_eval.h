@@ -52,9 +52,12 @@ struct PixelPrecisionRecall {
   double f_score = 0.0;    // harmonic mean (0 when both are 0)
 };
 
-// The pixel figures of one camera, or of all (camera empty).
+// The pixel figures of one camera, or of all (camera empty), or of the pixels whose
+// ground-truth hit is on the triangles of one label (label set; then every ray has a
+// ground-truth hit).
 struct PixelScores {
   std::string camera;  // the camera's name; empty for the total
+  std::string label;   // the label's name; empty unless the figures are a label's
   long rays = 0, estimated_hits = 0, gt_hits = 0, both_hits = 0;
   std::vector<PixelPrecisionRecall> precision_recall;  // one per RayErrorOptions threshold
   // Both-hit pixels with an error above pixel_tail_error: all of them, those whose estimated hit
@@ -77,12 +80,23 @@ struct RayErrorResult {
   double pixel_tail_error = 0.0;           // metres, as in the options
   PixelScores pixel;                       // all cameras
   std::vector<PixelScores> pixel_cameras;  // one per rig camera, in rig order
+  // With GtLabels: one per label, in label order (every named label, and every other label a
+  // ground-truth hit met).
+  std::vector<PixelScores> pixel_labels;
 };
 
-// Throws InputError when there is no keyframe.
+// What the ground truth's triangles are (TriangleMesh::labels: synth's kinds of surface, a
+// pole, a wall, the road...), for the pixel figures per label.
+struct GtLabels {
+  std::vector<uint8_t> per_triangle;  // of the ground-truth mesh; empty: no figures per label
+  std::vector<std::string> names;     // names[label]; a label beyond them is "label N"
+};
+
+// Throws InputError when there is no keyframe; std::invalid_argument when a ground-truth hit's
+// triangle has no label in a non-empty labels.per_triangle.
 RayErrorResult EvaluateRayErrors(const Rig& rig, const std::vector<KeyframePoses>& keyframes,
                                  const RayCaster& estimated_surface, const RayCaster& gt_surface,
-                                 const RayErrorOptions& options = {});
+                                 const RayErrorOptions& options = {}, const GtLabels& labels = {});
 
 struct SurfaceCompareOptions {
   long samples = 200000;  // uniform area samples on each surface

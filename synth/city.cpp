@@ -501,7 +501,19 @@ CityScene BuildCity(const SynthCityOptions& options, uint64_t seed) {
     scene.normals.push_back(
         (scene.mesh.vertices[t[1]] - a).cross(scene.mesh.vertices[t[2]] - a).normalized());
   }
+  scene.mesh.labels.reserve(scene.surfaces.size());
+  for (const Surface surface : scene.surfaces) {
+    scene.mesh.labels.push_back(static_cast<uint8_t>(surface));
+  }
   return scene;
+}
+
+const std::vector<std::string>& SurfaceNames() {
+  static_assert(static_cast<int>(Surface::kCar) == 12, "a name for every Surface, in order");
+  static const std::vector<std::string> names = {"road",  "sidewalk", "kerb", "wall", "reveal",
+                                                 "glass", "door",     "roof", "trim", "pole",
+                                                 "trunk", "crown",    "car"};
+  return names;
 }
 
 }  // namespace omni::synth

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "calib/ply.h"
@@ -28,6 +29,10 @@ enum class Surface : uint8_t {
   kCar,
 };
 
+// The surfaces' names, in the enum's order ("road", "sidewalk", ..., "car"): the labels of the
+// ground truth's triangles (gt/mesh.ply's face property label, gt/scene.json "mesh_labels").
+const std::vector<std::string>& SurfaceNames();
+
 // The street network, for the road markings and the trajectory.
 struct StreetGrid {
   std::vector<double> x_lines;  // centre lines of the streets parallel to y, increasing
@@ -40,7 +45,7 @@ struct StreetGrid {
 struct CityScene {
   // Vertices are float-representable doubles, so that the binary PLY (float coordinates) holds
   // exactly the rendered triangles. Triangles face the free space (counter-clockwise from there).
-  TriangleMesh mesh;
+  TriangleMesh mesh;              // its labels: the surfaces, as numbers
   std::vector<Surface> surfaces;  // per triangle
   std::vector<uint32_t> objects;  // per triangle: which building, tree, car... (texture seed)
   std::vector<Eigen::Vector3d> normals;  // per triangle, unit, outward

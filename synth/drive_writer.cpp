@@ -192,10 +192,14 @@ std::string SceneJson(const SyntheticDrive& drive) {
                 {"poles", drive.scene.num_poles},
                 {"trees", drive.scene.num_trees},
                 {"parked_cars", drive.scene.num_cars}};
+  // gt/mesh.ply's face property label, the index of the triangle's surface in this list.
+  j["mesh_labels"] = synth::SurfaceNames();
   const std::string pixels = r.colour ? "8-bit colour" : "8-bit grey";
   j["files"] = {{"images", "images/<camera>/<frame>.png, " + pixels + ", frames 000000..."},
                 {"poses", "gt/poses.tum: world_from_rig, timestamp = frame / frame_rate"},
-                {"mesh", "gt/mesh.ply: every rendered triangle, metres, facing free space"}};
+                {"mesh",
+                 "gt/mesh.ply: every rendered triangle, metres, facing free space; its "
+                 "face property label indexes mesh_labels"}};
   if (stepped) {
     j["files"]["images"] = "images/<camera>/<frame>.png, " + pixels +
                            ", one trajectory frame in frame_step, named by its trajectory index";

@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "calib/ply.h"
@@ -91,6 +92,22 @@ TEST_F(EvalTest, CommandLine) {
       << output;
   EXPECT_TRUE(fs::exists(rec_ / "report" / "eval.json"));
   EXPECT_NE(output.find("pose registration RMS 0.0 cm over 30 keyframes"), std::string::npos)
+      << output;
+  EXPECT_EQ(output.find("behind the truth, what the true ray hits"), std::string::npos) << output;
+  // A ground truth with labels (as synth writes), an estimate without the north row of blocks:
+  // the console says what the pixels behind the truth should have hit.
+  TriangleMesh labelled = gt_mesh_;
+  labelled.labels = testing::StreetLabels();
+  WritePlyMesh(labelled, drive_ / "gt" / "mesh.ply");
+  std::ofstream(drive_ / "gt" / "scene.json") << testing::kStreetLabelsJson;
+  WriteReconstruction(kEstimatedFromGt, testing::StreetWithoutNorthRow());
+  EXPECT_EQ(RunOmnisculpt("eval --force --gt " + drive_.string() + " --rec " + rec_.string() +
+                              " --pixels 5000 --samples 5000 --no-plots --no-renders",
+                          &output),
+            0)
+      << output;
+  EXPECT_NE(output.find("behind the truth, what the true ray hits: north 100 % ("),
+            std::string::npos)
       << output;
   EXPECT_EQ(RunOmnisculpt("eval --gt " + drive_.string() + " --rec " + (root_ / "nowhere").string(),
                           &output),

@@ -95,6 +95,49 @@ TEST(Ply, ColouredMeshRoundTrip) {
   EXPECT_THROW(WritePlyMesh(mesh, dir / "bad.ply"), std::invalid_argument);
 }
 
+// Labels per triangle (synth's kinds of surface) round trip as a uchar face property, a
+// polygon's label goes to every triangle of its fan, and a label must be a scalar integer in
+// [0, 255].
+TEST(Ply, TriangleLabelsRoundTripAndFollowTheFans) {
+  TempDir dir;
+  TriangleMesh mesh;
+  mesh.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  mesh.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  mesh.labels = {3, 0, 255, 12};
+  const auto path = dir / "labelled.ply";
+  WritePlyMesh(mesh, path);
+  EXPECT_NE(ReadBytes(path).find("property list uchar int vertex_indices\nproperty uchar label\n"),
+            std::string::npos);
+  const TriangleMesh read = ReadPlyMesh(path);
+  EXPECT_EQ(read.triangles, mesh.triangles);
+  EXPECT_EQ(read.labels, mesh.labels);
+  // Without labels the file has no such property and reads back without them.
+  mesh.labels.clear();
+  WritePlyMesh(mesh, path);
+  EXPECT_EQ(ReadBytes(path).find("label"), std::string::npos);
+  EXPECT_TRUE(ReadPlyMesh(path).labels.empty());
+  // A label list that does not match the triangles is a bug of the caller.
+  mesh.labels = {1, 2, 3};
+  EXPECT_THROW(WritePlyMesh(mesh, dir / "bad.ply"), std::invalid_argument);
+
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 2\n";
+  const std::string vertices = "0 0 0\n1 0 0\n1 1 0\n0 1 0\n2 2 0\n";
+  // The label before the indices, a quad then a triangle.
+  WriteBytes(path, head + "property int label\nproperty list uchar int vertex_indices\n" +
+                       "end_header\n" + vertices + "7 4 0 1 2 3\n9 3 1 4 2\n");
+  const TriangleMesh quad = ReadPlyMesh(path);
+  ASSERT_EQ(quad.triangles.size(), 3u);
+  EXPECT_EQ(quad.labels, (std::vector<uint8_t>{7, 7, 9}));
+  WriteBytes(path, head + "property list uchar int vertex_indices\nproperty int label\n" +
+                       "end_header\n" + vertices + "4 0 1 2 3 7\n3 1 4 2 256\n");
+  EXPECT_TRUE(Contains(MeshError(path), "face 1: label 256 out of range [0, 255]"));
+  WriteBytes(path, head + "property list uchar int vertex_indices\nproperty float label\n" +
+                       "end_header\n" + vertices + "4 0 1 2 3 7\n3 1 4 2 2\n");
+  EXPECT_TRUE(Contains(MeshError(path), "element face: property label is not a scalar integer"));
+}
+
 TEST(Ply, ColouredPointsRoundTrip) {
   TempDir dir;
   PointCloud cloud;

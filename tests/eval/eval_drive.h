@@ -49,6 +49,27 @@ inline TriangleMesh MakeStreet() {
   return mesh;
 }
 
+// MakeStreet's triangles labelled 0 (the enclosure), 1 (a north block) and 2 (a south block),
+// and the names of the labels as gt/scene.json gives them.
+inline std::vector<uint8_t> StreetLabels() {
+  std::vector<uint8_t> labels(12, 0);
+  for (int i = 0; i < 5; ++i) {
+    labels.insert(labels.end(), 12, 1);
+    labels.insert(labels.end(), 12, 2);
+  }
+  return labels;
+}
+inline const char* kStreetLabelsJson = R"({"mesh_labels": ["enclosure", "north", "south"]})";
+
+// MakeStreet without its north row of blocks.
+inline TriangleMesh StreetWithoutNorthRow() {
+  TriangleMesh mesh = FlipOrientation(MakeBox({-20, -20, -1}, {80, 20, 30}));
+  for (int i = 0; i < 5; ++i) {
+    AppendMesh(MakeBox({i * 12.0 + 3, -12, -1}, {i * 12.0 + 11, -6, 10.0 - i}), &mesh);
+  }
+  return mesh;
+}
+
 inline std::vector<StampedPose> MakeGtPoses(int frames) {
   std::vector<StampedPose> poses;
   for (int f = 0; f < frames; ++f) {

@@ -279,5 +279,84 @@ TEST(PixelEval, ConfiguredThresholds) {
   EXPECT_DOUBLE_EQ(At(result.pixel, 3).threshold, 2.0);
 }
 
+// The primitives keep the labels one per triangle: appended when both meshes have them, kept by
+// the welding, dropped when one part has none.
+TEST(PixelEval, PrimitivesKeepTheLabelsOnePerTriangle) {
+  TriangleMesh a = MakeBox({0, 0, 0}, {1, 1, 1}), b = MakeBox({1, 1, 1}, {2, 2, 2});
+  a.labels.assign(a.triangles.size(), 4);
+  b.labels.assign(b.triangles.size(), 9);
+  TriangleMesh both;
+  AppendMesh(a, &both);
+  AppendMesh(b, &both);
+  ASSERT_EQ(both.labels.size(), both.triangles.size());
+  EXPECT_EQ(both.labels.front(), 4);
+  EXPECT_EQ(both.labels.back(), 9);
+  EXPECT_EQ(WeldVertices(both).labels, both.labels);
+  AppendMesh(MakeBox({3, 3, 3}, {4, 4, 4}), &both);
+  EXPECT_TRUE(both.labels.empty());
+}
+
+// The figures per label of the ground truth's triangles: a pole (a plate 5 m away over the left
+// half of the view, y > 0) that the estimate lacks, in front of a wall at 10 m; a box at 7 m over
+// the lower right quarter, in both. The pole's pixels are all behind the truth, the wall's and
+// the box's all right; the labels add up to the total.
+TEST(PixelEval, LabelsOfTheGroundTruthSplitThePixels) {
+  const Rig rig = OneCameraRig();
+  constexpr uint8_t kPole = 1, kWall = 3, kBox = 7;
+  const TriangleMesh wall = WallAtX(10.0);
+  const TriangleMesh pole = MakeBox({5.0, 0.0, -50}, {5.1, 50, 50});
+  const TriangleMesh box = MakeBox({7.0, -50, -50}, {8.0, 0.0, 0.0});
+  TriangleMesh truth = wall, estimate = wall;
+  AppendMesh(pole, &truth);
+  AppendMesh(box, &truth);
+  AppendMesh(box, &estimate);
+  GtLabels labels;
+  labels.per_triangle.insert(labels.per_triangle.end(), wall.triangles.size(), kWall);
+  labels.per_triangle.insert(labels.per_triangle.end(), pole.triangles.size(), kPole);
+  labels.per_triangle.insert(labels.per_triangle.end(), box.triangles.size(), kBox);
+  labels.names = {"road", "pole", "glass", "wall"};  // kBox has no name
+  const RayCaster gt(truth), estimated(estimate);
+  std::vector<KeyframePoses> keyframes;
+  const Rigid3d pose(Eigen::Quaterniond::Identity(), Eigen::Vector3d::Zero());
+  keyframes.push_back({pose, pose});
+  const RayErrorResult result = EvaluateRayErrors(rig, keyframes, estimated, gt, Options(), labels);
+  ASSERT_EQ(result.pixel_labels.size(), 5u);  // the four named, and the one met without a name
+  const std::vector<std::string> names = {"road", "pole", "glass", "wall", "label 7"};
+  for (size_t i = 0; i < names.size(); ++i) EXPECT_EQ(result.pixel_labels[i].label, names[i]);
+  const PixelScores &road = result.pixel_labels[0], &pole_scores = result.pixel_labels[1],
+                    &wall_scores = result.pixel_labels[3], &box_scores = result.pixel_labels[4];
+  EXPECT_EQ(road.gt_hits, 0);
+  EXPECT_EQ(road.tail, 0.0);
+  EXPECT_NEAR(pole_scores.gt_hits, 2500, 150);
+  EXPECT_NEAR(wall_scores.gt_hits, 1250, 150);
+  EXPECT_NEAR(box_scores.gt_hits, 1250, 150);
+  EXPECT_EQ(pole_scores.both_hits, pole_scores.gt_hits);
+  EXPECT_DOUBLE_EQ(At(pole_scores, 1).recall, 0.0);
+  EXPECT_DOUBLE_EQ(pole_scores.tail_behind, 1.0);
+  EXPECT_EQ(pole_scores.tail_front_count, 0);
+  for (const PixelScores* right : {&wall_scores, &box_scores}) {
+    EXPECT_DOUBLE_EQ(At(*right, 0).recall, 1.0);
+    EXPECT_DOUBLE_EQ(At(*right, 0).precision, 1.0);
+    EXPECT_EQ(right->tail_count, 0);
+  }
+  long gt_hits = 0, behind = 0, within = 0;
+  for (const PixelScores& p : result.pixel_labels) {
+    gt_hits += p.gt_hits;
+    behind += p.tail_behind_count;
+    within += At(p, 1).within;
+    EXPECT_EQ(p.camera, "");
+  }
+  EXPECT_EQ(gt_hits, result.pixel.gt_hits);
+  EXPECT_EQ(behind, result.pixel.tail_behind_count);
+  EXPECT_EQ(within, At(result.pixel, 1).within);
+
+  // Without labels, no figures per label; a label list shorter than the triangles hit is a bug
+  // of the caller.
+  EXPECT_TRUE(EvaluateRayErrors(rig, keyframes, estimated, gt, Options()).pixel_labels.empty());
+  labels.per_triangle.resize(wall.triangles.size());
+  EXPECT_THROW(EvaluateRayErrors(rig, keyframes, estimated, gt, Options(), labels),
+               std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace omni

@@ -96,6 +96,7 @@ TEST_F(EvalTest, PixelFiguresPerCameraAndInTotal) {
                           "tail_behind_count", "estimated_hits", "gt_hits", "both_hits"}) {
     EXPECT_TRUE(pixel.contains(key)) << key;
   }
+  EXPECT_FALSE(pixel.contains("labels"));  // the ground truth's triangles have no labels
   ASSERT_EQ(pixel["cameras"].size(), 4u);
   long rays = 0, within = 0;
   for (size_t c = 0; c < 4; ++c) {
@@ -116,6 +117,60 @@ TEST_F(EvalTest, PixelFiguresPerCameraAndInTotal) {
   EXPECT_NE(md.str().find("P / R / F at 20.0 cm"), std::string::npos) << md.str();
   EXPECT_NE(md.str().find("| cam3 |"), std::string::npos) << md.str();
   EXPECT_NE(md.str().find("| **all** | 20000 |"), std::string::npos) << md.str();
+}
+
+// A ground truth whose triangles carry labels (as synth's do) and names in gt/scene.json: the
+// pixel figures per label in eval.json and report.md. The estimate lacks the north row of
+// blocks, so every pixel whose true hit is on it is behind the truth (the enclosure or the
+// ground beyond); the south row is right.
+TEST_F(EvalTest, PixelFiguresPerLabelOfTheGroundTruth) {
+  TriangleMesh labelled = gt_mesh_;
+  labelled.labels = testing::StreetLabels();
+  WritePlyMesh(labelled, drive_ / "gt" / "mesh.ply");
+  std::ofstream(drive_ / "gt" / "scene.json") << testing::kStreetLabelsJson;
+  WriteReconstruction(kEstimatedFromGt, testing::StreetWithoutNorthRow());
+  EvalOptions options = SmallOptions();
+  options.plots = false;
+  options.renders = false;
+  const EvalSummary summary = RunEvaluation(drive_, rec_, root_ / "report", options);
+  const RayErrorResult& r = summary.ray_errors;
+  ASSERT_EQ(r.pixel_labels.size(), 3u);
+  const PixelScores &north = r.pixel_labels[1], &south = r.pixel_labels[2];
+  EXPECT_EQ(north.label, "north");
+  EXPECT_GT(north.gt_hits, 1000);
+  // All lost but the blocks' feet, whose pixels find the ground within a metre behind them.
+  EXPECT_LT(north.precision_recall[1].recall, 0.05);
+  EXPECT_GT(north.tail_behind, 0.9);
+  EXPECT_EQ(north.tail_front_count, 0);
+  EXPECT_GT(south.gt_hits, 1000);
+  EXPECT_DOUBLE_EQ(south.precision_recall[1].recall, 1.0);
+  EXPECT_EQ(south.tail_count, 0);
+  EXPECT_EQ(north.tail_behind_count + r.pixel_labels[0].tail_behind_count,
+            r.pixel.tail_behind_count);
+
+  std::ifstream json_file(root_ / "report" / "eval.json");
+  const nlohmann::json json = nlohmann::json::parse(json_file);
+  ASSERT_EQ(json["pixel"]["labels"].size(), 3u);
+  EXPECT_EQ(json["pixel"]["labels"][1]["label"], "north");
+  EXPECT_EQ(json["pixel"]["labels"][1]["tail_behind_count"].get<long>(), north.tail_behind_count);
+  std::ifstream md_file(root_ / "report" / "report.md");
+  std::stringstream md;
+  md << md_file.rdbuf();
+  EXPECT_NE(md.str().find("By what the ground-truth ray hits"), std::string::npos) << md.str();
+  EXPECT_NE(md.str().find("| north | " + std::to_string(north.gt_hits) + " |"), std::string::npos)
+      << md.str();
+
+  // Without the names the labels are numbered, and eval says why.
+  fs::remove(drive_ / "gt" / "scene.json");
+  const EvalSummary unnamed = RunEvaluation(drive_, rec_, root_ / "report2", options);
+  ASSERT_EQ(unnamed.ray_errors.pixel_labels.size(), 3u);
+  EXPECT_EQ(unnamed.ray_errors.pixel_labels[1].label, "label 1");
+  EXPECT_EQ(unnamed.ray_errors.pixel_labels[1].tail_behind_count, north.tail_behind_count);
+  bool warned = false;
+  for (const std::string& warning : unnamed.warnings) {
+    warned |= warning.find("mesh_labels") != std::string::npos;
+  }
+  EXPECT_TRUE(warned);
 }
 
 TEST_F(EvalTest, MissingGnuplotOnlyWarns) {

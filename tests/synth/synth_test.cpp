@@ -11,6 +11,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
@@ -24,6 +25,7 @@
 #include "calib/rig_io.h"
 #include "calib/tum.h"
 #include "raycast/raycast.h"
+#include "synth/city.h"
 #include "synth/drive_writer.h"
 #include "synth/renderer.h"
 #include "tests/calib/io_temp_dir.h"
@@ -226,6 +228,54 @@ TEST_F(TinyDriveTest, HitsReprojectToTheirPixelAndLieOnTheWrittenMesh) {
   EXPECT_LT(worst_reprojection, 0.01);
   EXPECT_LT(worst_distance, 1e-4);
   EXPECT_GE(facing, hits * 99 / 100);
+}
+
+// gt/mesh.ply labels every triangle with its surface (the index in gt/scene.json's
+// mesh_labels): the labels read back are the scene's surfaces, and they say what the geometry
+// is: the road lies flat on the ground, a pole's triangles are narrow and upright, a car's are
+// below 2 m.
+TEST_F(TinyDriveTest, TheMeshLabelsEveryTriangleWithItsSurface) {
+  const SyntheticDrive drive = MakeSyntheticDrive(SynthPresetOptions("tiny"), DefaultRig());
+  const TriangleMesh mesh = ReadPlyMesh(*folder_ / "gt" / "mesh.ply");
+  ASSERT_EQ(mesh.labels.size(), mesh.triangles.size());
+  ASSERT_EQ(drive.scene.surfaces.size(), mesh.triangles.size());
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    ASSERT_EQ(mesh.labels[t], static_cast<uint8_t>(drive.scene.surfaces[t])) << t;
+  }
+  std::ifstream scene_file(*folder_ / "gt" / "scene.json");
+  const nlohmann::json scene = nlohmann::json::parse(scene_file);
+  EXPECT_EQ(scene.at("mesh_labels").get<std::vector<std::string>>(), synth::SurfaceNames());
+  const std::vector<std::string>& names = synth::SurfaceNames();
+  auto label_of = [&](const std::string& name) {
+    return static_cast<uint8_t>(std::find(names.begin(), names.end(), name) - names.begin());
+  };
+  std::map<std::string, int> counted;
+  double road_height = 0.0, pole_width = 0.0, pole_height = 0.0, car_top = 0.0;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    Eigen::Vector3d lo = mesh.vertices[mesh.triangles[t][0]], hi = lo;
+    for (int k = 1; k < 3; ++k) {
+      lo = lo.cwiseMin(mesh.vertices[mesh.triangles[t][k]]);
+      hi = hi.cwiseMax(mesh.vertices[mesh.triangles[t][k]]);
+    }
+    const std::string& name = names.at(mesh.labels[t]);
+    ++counted[name];
+    if (mesh.labels[t] == label_of("road")) {
+      road_height = std::max({road_height, std::abs(lo.z()), std::abs(hi.z())});
+    } else if (mesh.labels[t] == label_of("pole")) {
+      pole_width = std::max({pole_width, hi.x() - lo.x(), hi.y() - lo.y()});
+      pole_height = std::max(pole_height, hi.z() - lo.z());
+    } else if (mesh.labels[t] == label_of("car")) {
+      car_top = std::max(car_top, hi.z());
+    }
+  }
+  for (const char* name : {"road", "wall", "pole", "car", "trim"}) {
+    EXPECT_GT(counted[name], 0) << name;
+  }
+  EXPECT_LT(road_height, 0.01);
+  EXPECT_LT(pole_width, 0.5);
+  EXPECT_GT(pole_height, 2.0);
+  EXPECT_GT(car_top, 1.0);
+  EXPECT_LT(car_top, 2.0);
 }
 
 TEST_F(TinyDriveTest, SideImagesHaveManyHarrisCorners) {

@@ -411,12 +411,15 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
       !vertex_element->properties[*rgb[1]].is_list && !vertex_element->properties[*rgb[2]].is_list;
 
   PlyContent content;
+  bool labels_dropped = false;
   DataReader reader(data, header, path);
   std::vector<double> row;
   for (const PlyElement& element : header.elements) {
     reader.SetElement(element.name);
     const bool is_vertex = &element == vertex_element;
-    std::optional<size_t> indices_property, label_property;
+    std::optional<size_t> indices_property;
+    bool has_label = false;  // the face's property label_index is a label of ours
+    size_t label_index = 0;
     if (read_faces && element.name == "face") {
       indices_property = element.Find("vertex_indices");
       if (!indices_property) indices_property = element.Find("vertex_index");
@@ -425,10 +428,11 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
         throw InputError(path, "element face",
                          "no integer list property vertex_indices or vertex_index");
       }
-      label_property = element.Find("label");
-      if (label_property && (element.properties[*label_property].is_list ||
-                             !IsIntegerType(element.properties[*label_property].type))) {
-        throw InputError(path, "element face", "property label is not a scalar integer");
+      // Labels are optional: a property of another kind (a list, a real number) is not ours.
+      if (const auto label = element.Find("label")) {
+        has_label =
+            !element.properties[*label].is_list && IsIntegerType(element.properties[*label].type);
+        label_index = *label;
       }
     }
     if (!is_vertex && !indices_property) {
@@ -482,15 +486,16 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
           }
         }
       }
-      if (label_property) {
-        // Read after the whole row: the property may come before or after the indices.
-        const double label = row[*label_property];
-        if (!(label >= 0.0 && label <= 255.0)) {
-          std::ostringstream problem;
-          problem << "face " << item << ": label " << label << " out of range [0, 255]";
-          reader.Fail(problem.str());
+      if (has_label) {
+        // Read after the whole row: the property may come before or after the indices. Values
+        // beyond a byte (another program's ids) are not labels of ours: the mesh has none.
+        const double label = row[label_index];
+        if (label >= 0.0 && label <= 255.0) {
+          content.labels.resize(content.triangles.size(), static_cast<uint8_t>(label));
+        } else {
+          has_label = false;
+          labels_dropped = true;
         }
-        content.labels.resize(content.triangles.size(), static_cast<uint8_t>(label));
       }
       if (is_vertex) {
         const Eigen::Vector3d vertex(row[xyz[0]], row[xyz[1]], row[xyz[2]]);
@@ -517,6 +522,7 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
     }
   }
   reader.ExpectEnd();
+  if (labels_dropped) content.labels.clear();
   return content;
 }
 

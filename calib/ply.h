@@ -31,8 +31,8 @@ struct PointCloud {
 // bytes; ascii may end in white space), a vertex coordinate that is not finite, an ascii value
 // that is not a decimal number of its type (no hexadecimal, inf or nan; integers in the type's
 // range), a face index out of range. Faces with more than three vertices are split into fans.
-// A scalar integer face property `label` (values 0 to 255) gives TriangleMesh::labels, the
-// face's label on each triangle of its fan.
+// A scalar integer face property `label` gives TriangleMesh::labels, the face's label on each
+// triangle of its fan, when every value is from 0 to 255 (otherwise the mesh has no labels).
 TriangleMesh ReadPlyMesh(const std::filesystem::path& path);
 PointCloud ReadPlyPoints(const std::filesystem::path& path);
 // The same on the bytes of a file in memory; `source` names it in the errors.

@@ -268,13 +268,6 @@ TEST_F(BadInputCatalogue, MeshCheckRefusesNonFiniteTrailingAndMiscountedPly) {
            "0 0 0\n1 0 0\n0 1 0\n0 0 1\n" + faces,
        "after the last element"},
       {head + "0 0 0\n1 0 0\n0 1 0\n0 0 1\n" + faces.substr(0, faces.size() - 8), "truncated data"},
-      // A face label (as synth writes) out of a byte's range, or not an integer.
-      {head.substr(0, head.find("end_header")) + "property int label\nend_header\n" +
-           "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1 3\n3 0 1 3 300\n3 1 2 3 0\n3 0 3 2 0\n",
-       "face 1: label 300 out of range [0, 255]"},
-      {head.substr(0, head.find("end_header")) + "property float label\nend_header\n" +
-           "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1 3\n3 0 1 3 3\n3 1 2 3 0\n3 0 3 2 0\n",
-       "property label is not a scalar integer"},
   };
   for (const Case& c : cases) {
     WriteFile(path, c.bytes);

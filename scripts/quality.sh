@@ -2,7 +2,9 @@
 # The reconstruction's quality over several drives and starts, for one build and its options or
 # two of them side by side: `omnisculpt reconstruct` then `omnisculpt eval` on each drive of a
 # set (synthetic drives, made once), and one table (scripts/quality_summary.py) with every run's
-# pixel F-scores, tail, error quantiles, the closed surface's and the keyframes' ATE, and their
+# pixel F-scores, tail, error quantiles, the closed surface's and the keyframes' ATE, the recall
+# and the share behind the truth of the pixels that see objects in front of the walls and the
+# ground (trim, poles, trunks, crowns, cars: synth's labels, docs/figures.md F81), and their
 # means per build (and the paired differences B − A).
 #
 # One run of one drive is not a measurement of a small change: a change of float rounding alone

@@ -411,7 +411,6 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
       !vertex_element->properties[*rgb[1]].is_list && !vertex_element->properties[*rgb[2]].is_list;
 
   PlyContent content;
-  bool labels_dropped = false;
   DataReader reader(data, header, path);
   std::vector<double> row;
   for (const PlyElement& element : header.elements) {
@@ -494,7 +493,7 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
           content.labels.resize(content.triangles.size(), static_cast<uint8_t>(label));
         } else {
           has_label = false;
-          labels_dropped = true;
+          content.labels.clear();
         }
       }
       if (is_vertex) {
@@ -522,7 +521,6 @@ PlyContent ParsePly(const std::string& data, const std::filesystem::path& path, 
     }
   }
   reader.ExpectEnd();
-  if (labels_dropped) content.labels.clear();
   return content;
 }
 

@@ -642,8 +642,8 @@ namespace {
 
 // The pixel figures by what the ground-truth ray hits (the labels of gt/mesh.ply's triangles).
 void LabelsMarkdown(const RayErrorResult& r, std::ostringstream& md) {
-  long behind_total = 0;
-  for (const PixelScores& p : r.pixel_labels) behind_total += p.tail_behind_count;
+  // Every ground-truth hit has a label, so the labels' pixels behind add up to the total's.
+  const long behind_total = r.pixel.tail_behind_count;
   md << "\nBy what the ground-truth ray hits (gt/mesh.ply's labels): of the pixels whose "
         "ground-truth hit is on such triangles, the recall, the tail as a share of those with "
         "both hits, and the label's share of all the pixels behind the truth.\n\n"

@@ -42,6 +42,13 @@ uint32_t DelaunayMesh::Impl::NextChange() {
 }
 
 void DelaunayMesh::Impl::IncidentCells(VertexHandle v, std::vector<CellHandle>& cells) const {
+  internal::VertexInfo& info = v->info();
+  if (info.star_first != internal::VertexInfo::kNoStar) {
+    const auto first = star_pool.begin() + info.star_first;
+    cells.insert(cells.end(), first, first + info.degree);
+    return;
+  }
+  const size_t found_from = cells.size();
   // CGAL's incident_cells_3: a depth-first search through the facets containing v, cells listed
   // when first met, with a scratch mark instead of the TDS flags, a std::stack and a copy.
   thread_local std::vector<CellHandle> stack;
@@ -63,6 +70,22 @@ void DelaunayMesh::Impl::IncidentCells(VertexHandle v, std::vector<CellHandle>& 
       cells.push_back(next);
     }
   }
+  if (!degrees_valid || info.index < 0) return;
+  const size_t size = cells.size() - found_from;
+  if (star_pool.size() + size > star_pool_cells) ForgetStars();
+  info.star_first = static_cast<uint32_t>(star_pool.size());
+  info.degree = static_cast<uint32_t>(size);
+  star_pool.insert(star_pool.end(), cells.begin() + found_from, cells.end());
+  star_pool_vertices.push_back(info.index);
+}
+
+void DelaunayMesh::Impl::ForgetStars() const {
+  for (int index : star_pool_vertices) {
+    if (index < static_cast<int>(vertices.size()))
+      vertices[index]->info().star_first = internal::VertexInfo::kNoStar;
+  }
+  star_pool.clear();
+  star_pool_vertices.clear();
 }
 
 void DelaunayMesh::Impl::SetInO(CellHandle c, bool in_o) {
@@ -109,7 +132,12 @@ void DelaunayMesh::Impl::UpdateDegrees(const std::vector<VertexHandle>& inserted
     return;
   }
   if (!degrees_valid) {
-    for (auto w : tri.all_vertex_handles()) w->info().degree = 0;
+    for (auto w : tri.all_vertex_handles()) {
+      w->info().degree = 0;
+      w->info().star_first = internal::VertexInfo::kNoStar;
+    }
+    star_pool.clear();
+    star_pool_vertices.clear();
     degrees_valid = true;
     return;
   }
@@ -126,7 +154,11 @@ void DelaunayMesh::Impl::UpdateDegrees(const std::vector<VertexHandle>& inserted
 
 void DelaunayMesh::Impl::StarsChanged(const std::vector<CellHandle>& new_cells) {
   for (const CellHandle& c : new_cells) {
-    for (int i = 0; i < 4; ++i) c->vertex(i)->info().degree = 0;
+    for (int i = 0; i < 4; ++i) {
+      internal::VertexInfo& info = c->vertex(i)->info();
+      info.degree = 0;
+      info.star_first = internal::VertexInfo::kNoStar;
+    }
   }
 }
 

@@ -1291,7 +1291,16 @@ struct IncrementalSculptor::Impl {
   void FinishStats(KeyframeStats& st) const {
     st.single_tests_skipped = single_tests_skipped;
     st.attempts_skipped = attempts_skipped;
-    st.cells_t = t.tri.number_of_finite_cells();
+    // The finite cells: all of them but the star of the infinite vertex (CGAL's
+    // number_of_finite_cells walks every cell).
+    if (t.tri.dimension() == 3) {
+      thread_local std::vector<CellHandle> hull;
+      hull.clear();
+      t.IncidentCells(t.tri.infinite_vertex(), hull);
+      st.cells_t = t.tri.number_of_cells() - hull.size();
+    } else {
+      st.cells_t = t.tri.number_of_finite_cells();
+    }
     st.cells_f = t.num_f;
     st.cells_o = t.num_o;
     st.triangles = t.num_triangles;

@@ -34,6 +34,10 @@ struct VertexInfo {
   // 0 < o_cells < degree (VertexOnSurface).
   uint32_t o_cells = 0;
   uint32_t degree = 0;
+  // The star as DelaunayMesh::Impl::IncidentCells found it last, cells star_first ..
+  // star_first + degree − 1 of Impl::star_pool, while the star is unchanged (kNoStar: none).
+  uint32_t star_first = kNoStar;
+  static constexpr uint32_t kNoStar = 0xffffffffu;
 };
 
 struct CellInfo {
@@ -64,8 +68,8 @@ inline Point ToCgal(const Eigen::Vector3d& p) { return Point(p.x(), p.y(), p.z()
 inline Eigen::Vector3d ToEigen(const Point& p) { return Eigen::Vector3d(p.x(), p.y(), p.z()); }
 
 // Calls visit(cell, k, a, b) for each δO triangle around v among the cells [begin, end) (v's
-// star, or part of it): facet k of a cell of O incident to v whose neighbour across it is outside O;
-// a and b are the facet's vertices other than v (its v-opposite edge), in the cell's vertex
+// star, or part of it): facet k of a cell of O incident to v whose neighbour across it is outside
+// O; a and b are the facet's vertices other than v (its v-opposite edge), in the cell's vertex
 // order.
 template <class Visit>
 void ForEachBorderTriangleIn(const CellHandle* begin, const CellHandle* end, VertexHandle v,
@@ -137,8 +141,17 @@ struct DelaunayMesh::Impl {
   uint32_t change_epoch = 0;
   uint32_t NextChange();
   // The cells incident to v (v finite, dimension 3) in the order of CGAL's incident_cells,
-  // without its allocations (a scratch mark per cell, see NewMark).
+  // without its allocations (a scratch mark per cell, see NewMark). Appended to `cells`.
+  // While the degrees are kept (degrees_valid), a star found is kept in star_pool until an
+  // insertion changes it (StarsChanged): the manifold tests of a keyframe's steps ask for the
+  // same stars again and again (about four times each on the demo drive), and T changes only
+  // when points are inserted. The pool holds at most star_pool_cells cells (8 MiB); when full
+  // it is emptied.
   void IncidentCells(internal::VertexHandle v, std::vector<internal::CellHandle>& cells) const;
+  size_t star_pool_cells = size_t{1} << 20;
+  mutable std::vector<internal::CellHandle> star_pool;
+  mutable std::vector<int> star_pool_vertices;  // the vertex indices whose star is in the pool
+  void ForgetStars() const;
   // VertexInfo::degree after insertions: the degrees of the vertices of the cells incident to
   // the `inserted` vertices (an insertion changes only those stars) are to be counted again
   // (lazily, by Degree), or those of all vertices when they were not kept. Whoever inserts into

@@ -40,6 +40,41 @@ TEST(ManifoldShortcuts, IncidentCellsListsCgalsStarInItsOrder) {
   EXPECT_GT(total, 300u * 10u);
 }
 
+// The stars kept between calls (DelaunayMesh::Impl::star_pool) stay CGAL's star in its order
+// while points are inserted around them (an insertion drops the stars it changes), also when the
+// pool fills and is emptied.
+TEST(ManifoldShortcuts, KeptStarsFollowTheInsertions) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  DelaunayMesh mesh;
+  DelaunayMesh::Impl& t = *mesh.impl();
+  t.star_pool_cells = 5000;  // about two hundred stars: emptied in the later batches
+  std::vector<internal::CellHandle> ours, cgal;
+  size_t kept = 0, compared = 0, emptied = 0, last_size = 0;
+  int next = 0;
+  for (int batch = 0; batch < 12; ++batch) {
+    for (int i = 0; i < 25; ++i, ++next) mesh.Insert(Eigen::Vector3d(u(rng), u(rng), u(rng)), next);
+    for (int pass = 0; pass < 2; ++pass) {
+      for (const internal::VertexHandle& v : t.vertices) {
+        kept += v->info().star_first != internal::VertexInfo::kNoStar ? 1 : 0;
+        ours.clear();
+        cgal.clear();
+        t.IncidentCells(v, ours);
+        t.tri.incident_cells(v, std::back_inserter(cgal));
+        ASSERT_EQ(ours, cgal) << "batch " << batch << " vertex " << v->info().index;
+        ASSERT_EQ(t.Degree(v), cgal.size());
+        ++compared;
+        if (t.star_pool.size() < last_size) ++emptied;
+        last_size = t.star_pool.size();
+      }
+    }
+    EXPECT_LE(t.star_pool.size(), t.star_pool_cells);
+  }
+  EXPECT_GT(kept, compared / 10);  // stars were served from the pool
+  EXPECT_GT(emptied, 2u);
+  EXPECT_GT(compared, 3000u);
+}
+
 // Flips through SetInO stamp the vertices of the cell with an increasing change clock.
 TEST(ManifoldShortcuts, SetInOStampsTheVerticesOfTheFlippedCell) {
   std::mt19937 rng(9);

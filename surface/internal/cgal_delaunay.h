@@ -145,10 +145,10 @@ struct DelaunayMesh::Impl {
   // While the degrees are kept (degrees_valid), a star found is kept in star_pool until an
   // insertion changes it (StarsChanged): the manifold tests of a keyframe's steps ask for the
   // same stars again and again (about four times each on the demo drive), and T changes only
-  // when points are inserted. The pool holds at most star_pool_cells cells (8 MiB); when full
+  // when points are inserted. The pool holds at most star_pool_cells cells (2 MiB); when full
   // it is emptied.
   void IncidentCells(internal::VertexHandle v, std::vector<internal::CellHandle>& cells) const;
-  size_t star_pool_cells = size_t{1} << 20;
+  size_t star_pool_cells = size_t{1} << 18;
   mutable std::vector<internal::CellHandle> star_pool;
   mutable std::vector<int> star_pool_vertices;  // the vertex indices whose star is in the pool
   void ForgetStars() const;

@@ -62,12 +62,17 @@ class Refiner {
   }
 
   // Adds the group to O if δO stays a 2-manifold, then grows one cell at once from it.
-  bool TryGroup(const std::vector<CellHandle>& group) {
+  // `remember`: a failure is kept in the memo of failed groups (the edge stars are each tried
+  // once per call and seldom met again: they skip the memo and its allocations).
+  bool TryGroup(const std::vector<CellHandle>& group, bool remember = true) {
     // The outcome depends only on the group's cells and on O: a group that failed since the
     // last change of O fails again.
-    std::vector<CellHandle> key = group;
-    std::sort(key.begin(), key.end());
-    if (!reference_ && failed_.count(key)) return false;
+    std::vector<CellHandle> key;
+    if (remember && !reference_) {
+      key = group;
+      std::sort(key.begin(), key.end());
+      if (failed_.count(key)) return false;
+    }
     const std::vector<VertexHandle> vertices = VerticesOf(group);
     for (const CellHandle& c : group) t_.SetInO(c, true);
     // All must pass, so the order does not matter: the vertex that failed last (often in the
@@ -84,7 +89,7 @@ class Refiner {
     }
     if (!passed) {
       for (const CellHandle& c : group) t_.SetInO(c, false);
-      if (!reference_) failed_.insert(std::move(key));
+      if (remember && !reference_) failed_.insert(std::move(key));
       return false;
     }
     // Accepted (most groups are not): the local χ before and after.
@@ -233,7 +238,7 @@ GenusRefinementResult RefineGenus(DelaunayMesh::Impl& t, const std::vector<CellH
           if (a > b) std::swap(a, b);
           if (!tried.insert((a << 32) | b).second) continue;
           const std::vector<CellHandle> star = refiner.EdgeStar(c, i, j);
-          if (star.size() >= 2) refiner.TryGroup(star);
+          if (star.size() >= 2) refiner.TryGroup(star, /*remember=*/false);
         }
       }
     }

@@ -144,6 +144,9 @@ void DelaunayMesh::Impl::UpdateDegrees(const std::vector<VertexHandle>& inserted
   // An insertion replaces the cells of its conflict zone by cells incident to the new vertex:
   // the stars that changed are those of the vertices of the new vertex's cells (when a later
   // insertion destroyed them, its own new cells hold those vertices again).
+  // A vertex inserted earlier in the list (a Steiner vertex of step 1, listed again with the
+  // points of step 3) may have had its star kept since: search them all afresh.
+  for (const VertexHandle& v : inserted) v->info().star_first = internal::VertexInfo::kNoStar;
   thread_local std::vector<CellHandle> star;
   for (const VertexHandle& v : inserted) {
     star.clear();

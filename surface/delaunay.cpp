@@ -132,12 +132,8 @@ void DelaunayMesh::Impl::UpdateDegrees(const std::vector<VertexHandle>& inserted
     return;
   }
   if (!degrees_valid) {
-    for (auto w : tri.all_vertex_handles()) {
-      w->info().degree = 0;
-      w->info().star_first = internal::VertexInfo::kNoStar;
-    }
-    star_pool.clear();
-    star_pool_vertices.clear();
+    for (auto w : tri.all_vertex_handles()) w->info().degree = 0;
+    ForgetStars();
     degrees_valid = true;
     return;
   }

@@ -88,6 +88,12 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
                    "Keyframe once fewer than this share of the last keyframe's points are tracked "
                    "(default 0: 0.3, or 0.5 with --profile offline)")
       ->capture_default_str();
+  command
+      ->add_option("--min-followed-share", o->sfm.tracker.keyframes.min_followed_track_share,
+                   "Keyframe also once fewer than this share of the last keyframe's tracks (its "
+                   "observations, with or without a point) are still followed, so that short "
+                   "tracks reach a second keyframe and the map (0: off)")
+      ->capture_default_str();
   auto* max_frames = command->add_option("--max-frames", o->sfm.max_frames, "0: the whole drive")
                          ->capture_default_str();
   command
@@ -234,6 +240,9 @@ void ApplySfmOptions(const Rig& rig, const std::string& command_name, SfmCommand
                      "expected 0 (from the profile) or a share in (0, 1)");
   o->sfm.tracker.keyframes.min_tracked_share =
       o->min_tracked_share > 0.0 ? o->min_tracked_share : profile.min_tracked_share;
+  const double followed = o->sfm.tracker.keyframes.min_followed_track_share;
+  if (!(followed >= 0.0 && followed < 1.0))
+    throw InputError("", "--min-followed-share", "expected 0 (off) or a share in (0, 1)");
   if (o->downscale > 0.0) {
     o->sfm.tracks.harris.downscale = o->downscale;
   } else {

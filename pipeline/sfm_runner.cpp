@@ -447,6 +447,7 @@ SfmRunResult SfmRunner::Finish() {
   result.corners_per_image = front_end.harris.max_corners;
   result.corner_quality = front_end.harris.quality_level;
   result.min_tracked_share = s.options.tracker.keyframes.min_tracked_share;
+  result.min_followed_track_share = s.options.tracker.keyframes.min_followed_track_share;
   result.continuation_pool = front_end.continuation_pool;
   result.epipolar_min_depth = front_end.epipolar_min_depth;
   result.epipolar_search_radius = front_end.epipolar_search_radius;

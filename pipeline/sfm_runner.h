@@ -205,6 +205,8 @@ struct SfmRunResult {
   double corner_quality = 0.0;
   // The keyframe rule's share (KeyframeSelectionOptions::min_tracked_share).
   double min_tracked_share = 0.0;
+  // KeyframeSelectionOptions::min_followed_track_share.
+  double min_followed_track_share = 0.0;
   double continuation_pool = 1.0;
   // The epipolar search's near end (TrackBuilderOptions::epipolar_min_depth, 0: off), its bands'
   // narrowest and widest half widths (epipolar_search_radius, epipolar_max_search_radius:

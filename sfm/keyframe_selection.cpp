@@ -13,6 +13,8 @@ std::string KeyframeSelectionOptions::Check() const {
   if (!(max_rotation > 0.0)) return "max_rotation: expected a positive angle (radians)";
   if (!(min_tracked_share > 0.0 && min_tracked_share < 1.0))
     return "min_tracked_share: expected a value in (0, 1)";
+  if (!(min_followed_track_share >= 0.0 && min_followed_track_share < 1.0))
+    return "min_followed_track_share: expected a value in [0, 1)";
   if (min_tracked_points < 0) return "min_tracked_points: expected 0 or more";
   return {};
 }
@@ -32,6 +34,10 @@ KeyframeDecisionReason DecideKeyframe(const KeyframeCandidate& candidate,
       candidate.last_keyframe_points > 0
           ? static_cast<double>(candidate.tracked_points) / candidate.last_keyframe_points
           : 0.0;
+  result.followed_track_share =
+      candidate.last_keyframe_tracks > 0
+          ? static_cast<double>(candidate.followed_tracks) / candidate.last_keyframe_tracks
+          : 1.0;
   if (result.baseline_ratio > options.max_baseline_ratio) {
     result.decision = KeyframeDecision::kKeyframe;
     result.reason = "large baseline";
@@ -43,6 +49,9 @@ KeyframeDecisionReason DecideKeyframe(const KeyframeCandidate& candidate,
   } else if (result.tracked_share < options.min_tracked_share) {
     result.decision = KeyframeDecision::kKeyframe;
     result.reason = "few tracked points";
+  } else if (result.followed_track_share < options.min_followed_track_share) {
+    result.decision = KeyframeDecision::kKeyframe;
+    result.reason = "few tracks followed";
   } else if (candidate.inliers < options.min_tracked_points) {
     result.decision = KeyframeDecision::kKeyframe;
     result.reason = "few points left";

@@ -870,6 +870,16 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
     ++candidate.last_keyframe_points;
     candidate.tracked_points += tracked_now[it];
   }
+  if (options.keyframes.min_followed_track_share > 0.0) {
+    std::vector<int> followed;
+    followed.reserve(observations.size());
+    for (const TrackObservation& o : observations) followed.push_back(o.track);
+    std::sort(followed.begin(), followed.end());
+    for (const TrackObservation& o : keyframes[last].observations) {
+      ++candidate.last_keyframe_tracks;
+      candidate.followed_tracks += std::binary_search(followed.begin(), followed.end(), o.track);
+    }
+  }
   if (!depths.empty()) {
     std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
     candidate.median_depth = depths[depths.size() / 2];

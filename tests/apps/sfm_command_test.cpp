@@ -311,6 +311,7 @@ TEST_F(SfmCommandShortDrive, TheProfilesPoseEveryFrameAndOfflineIsWithinTwiceCol
   EXPECT_EQ(offline.front_end["corners_per_image"], 700);
   EXPECT_DOUBLE_EQ(accurate.front_end["min_tracked_share"].get<double>(), 0.3);
   EXPECT_DOUBLE_EQ(offline.front_end["min_tracked_share"].get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(realtime.front_end["min_followed_track_share"].get<double>(), 0.25);
   EXPECT_GT(offline.keyframes, 3 * realtime.keyframes / 2)
       << offline.keyframes << " keyframes, realtime " << realtime.keyframes;
   EXPECT_LT(realtime.keyframes_ate, 3 * 0.0026) << "realtime " << realtime.keyframes_ate << " m";
@@ -345,6 +346,7 @@ TEST_F(SfmCommandShortDrive, BadArgumentsAreOneErrorLine) {
   expect_refused("--corner-quality", "1", "q");
   expect_refused("--profile", "fast", "p");
   expect_refused("--min-tracked-share", "1", "m");
+  expect_refused("--min-followed-share", "1", "f");
   expect_refused("--epipolar-min-depth", "-1", "e");
   expect_refused("--epipolar-search-radius", "0", "r");
   expect_refused("--epipolar-max-search-radius", "5", "w");

@@ -115,6 +115,38 @@ TEST(KeyframeSelection, DecisionRules) {
   EXPECT_FALSE(options.Check().empty());
 }
 
+TEST(KeyframeSelection, FollowedTracksRule) {
+  // The last keyframe's points are still tracked (far points), but most of its tracks ended.
+  KeyframeSelectionOptions options;
+  options.min_followed_track_share = 0.2;
+  KeyframeCandidate candidate;
+  candidate.last_keyframe_points = 100;
+  candidate.tracked_points = 90;
+  candidate.inliers = 90;
+  candidate.median_depth = 10.0;
+  candidate.last_keyframe_tracks = 1000;
+  candidate.followed_tracks = 199;
+  candidate.world_from_rig.translation = Eigen::Vector3d(1.0, 0, 0);  // ratio 0.1
+  KeyframeDecisionReason reason = DecideKeyframe(candidate, options);
+  EXPECT_EQ(reason.decision, KeyframeDecision::kKeyframe);
+  EXPECT_STREQ(reason.reason, "few tracks followed");
+  EXPECT_DOUBLE_EQ(reason.followed_track_share, 0.199);
+  candidate.followed_tracks = 200;
+  EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kSkip);
+  // Without parallax the tracks' end does not make a keyframe: no point could be triangulated.
+  candidate.followed_tracks = 10;
+  candidate.world_from_rig.translation = Eigen::Vector3d(0.1, 0, 0);  // ratio 0.01
+  EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kSkip);
+  // Off (0): the point rule alone.
+  candidate.world_from_rig.translation = Eigen::Vector3d(1.0, 0, 0);
+  options.min_followed_track_share = 0.0;
+  EXPECT_EQ(DecideKeyframe(candidate, options).decision, KeyframeDecision::kSkip);
+  options.min_followed_track_share = 1.0;
+  EXPECT_FALSE(options.Check().empty());
+  options.min_followed_track_share = -0.1;
+  EXPECT_FALSE(options.Check().empty());
+}
+
 TEST(KeyframeSelection, BadOptionsThrowNamingTheField) {
   KeyframeSelectionOptions options;
   options.min_tracked_share = 1.5;

@@ -14,7 +14,8 @@
 namespace omni {
 
 int CornersPerImage(int num_cameras, int budget_factor) {
-  return std::max(1, budget_factor) * std::clamp(2100 / std::max(1, num_cameras), 350, 1000);
+  return std::min(
+      2000, std::max(1, budget_factor) * std::clamp(2100 / std::max(1, num_cameras), 350, 2000));
 }
 
 SfmProfile SfmProfileNamed(const std::string& name) {
@@ -47,7 +48,7 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
   command
       ->add_option("--corners", o->corners,
                    "Harris corners per image (default 0: 2100 over the rig's cameras, between 350 "
-                   "and 1000; twice that with --profile accurate or offline)")
+                   "and 2000; twice that with --profile accurate or offline, at most 2000)")
       ->capture_default_str();
   command
       ->add_option("--corner-quality", o->sfm.tracks.harris.quality_level,

@@ -59,8 +59,10 @@ SfmProfile SfmProfileNamed(const std::string& name);
 
 // Harris corners per image when --corners is not given: a keyframe's budget of about 2100
 // corners (the paper: about 2000 over six images) spread over the rig's cameras, between 350
-// and 1000 per image (a single camera has 1000: with 350 a phone photo kept too few matches,
-// with 700 its steps' directions were 3.5 degrees off), times the profile's factor.
+// and 2000 per image, times the profile's factor, at most 2000. A single camera has 2000: with 350
+// a phone photo kept too few matches, with 700 its steps' directions were 3.5 degrees off, and 2000
+// instead of 1000 made its keyframes' error 0.75-0.83 times as large over 40 starts of two
+// drives at 0.9 times the frames/s (docs/figures.md F85).
 int CornersPerImage(int num_cameras, int budget_factor = 1);
 
 // Adds the SfM group to `command` (the values land in *options, which must outlive it).

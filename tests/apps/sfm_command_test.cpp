@@ -392,10 +392,10 @@ TEST(SfmCommand, PinholePresetPosesEveryFrameThroughTheFirstTurn) {
   EXPECT_GT(eval.gt_length, 40.0);
   EXPECT_LT(eval.ate_translation.rmse, 0.01 * eval.gt_length)
       << "ATE RMSE " << eval.ate_translation.rmse << " m over " << eval.gt_length << " m";
-  // One camera: central mode, 1000 corners per image, the pool of both modes.
+  // One camera: central mode, 2000 corners per image, the pool of both modes.
   const nlohmann::json summary = nlohmann::json::parse(testing::ReadTextFile(out / "sfm.json"));
   EXPECT_EQ(summary.at("mode").get<std::string>(), "central");
-  EXPECT_EQ(summary.at("front_end").at("corners_per_image").get<int>(), 1000);
+  EXPECT_EQ(summary.at("front_end").at("corners_per_image").get<int>(), 2000);
   EXPECT_EQ(summary.at("front_end").at("continuation_pool").get<double>(), 2.0);
 }
 

@@ -39,13 +39,15 @@ TEST(SfmProfiles, EachSetsTheCornersAndTheKeyframeShareOfItsName) {
     EXPECT_DOUBLE_EQ(options.sfm.tracker.keyframes.min_tracked_share, expected.share)
         << expected.profile;
   }
-  // One camera: its budget of 1000, doubled.
+  // One camera: the cap of 2000 per image, whatever the profile.
   Rig one = rig;
   one.cameras.resize(1);
   SfmCommandLine single;
   Apply(one, "accurate", 0, 0.0, &single);
   EXPECT_EQ(single.sfm.tracks.harris.max_corners, 2000);
-  EXPECT_EQ(CornersPerImage(1), 1000);
+  EXPECT_EQ(CornersPerImage(1), 2000);
+  EXPECT_EQ(CornersPerImage(2), 1050);
+  EXPECT_EQ(CornersPerImage(2, 2), 2000);
   EXPECT_EQ(CornersPerImage(5, 2), 840);
 }
 

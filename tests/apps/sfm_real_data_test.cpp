@@ -104,9 +104,10 @@ TEST(SfmRealData, HiltiStandingStillKeepsItsStereoMap) {
 
 // The reference (OpenSfM's reconstruction, arbitrary scale) gives the photos' relative
 // rotations (5.6, 12.7 and 7.4 degrees), the ratio of the two steps (1.47) and their
-// directions. A single camera has 1000 corners per image by default: rotations 0.09 to 0.16
-// degrees and directions 0.8 to 2.1 degrees from the reference; with 700 corners a direction was
-// 3.5 degrees off, with 350 the third photo's rotation 2 degrees (docs/figures.md F28).
+// directions. A single camera had 1000 corners per image: rotations 0.09 to 0.16 degrees and
+// directions 0.8 to 2.1 degrees from the reference; with 700 corners a direction was 3.5
+// degrees off, with 350 the third photo's rotation 2 degrees (docs/figures.md F28). It has 2000
+// now (F85).
 void ExpectBerlinPhotosAgreeWithTheReference(const std::vector<std::string>& options,
                                              const std::string& label) {
   SCOPED_TRACE(label);

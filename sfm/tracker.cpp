@@ -864,21 +864,24 @@ FrameResult Tracker::Impl::Track(const std::vector<TrackObservation>& input_obse
     reobserved.push_back(static_cast<int>(j));
     if (options.reobserved_count_as_tracked) tracked_now[it] = 1;
   }
+  // The frame's tracks, sorted, when the keyframe rule counts the last keyframe's followed ones.
+  std::vector<int> followed;
+  const bool count_followed = options.keyframes.min_followed_track_share > 0.0;
+  if (count_followed) {
+    followed.reserve(observations.size());
+    for (const TrackObservation& o : observations) followed.push_back(o.track);
+    std::sort(followed.begin(), followed.end());
+  }
   for (const TrackObservation& observation : keyframes[last].observations) {
+    if (count_followed) {
+      ++candidate.last_keyframe_tracks;
+      candidate.followed_tracks +=
+          std::binary_search(followed.begin(), followed.end(), observation.track);
+    }
     const auto it = track_to_point.Find(observation.track);
     if (it < 0 || !points[it].alive) continue;
     ++candidate.last_keyframe_points;
     candidate.tracked_points += tracked_now[it];
-  }
-  if (options.keyframes.min_followed_track_share > 0.0) {
-    std::vector<int> followed;
-    followed.reserve(observations.size());
-    for (const TrackObservation& o : observations) followed.push_back(o.track);
-    std::sort(followed.begin(), followed.end());
-    for (const TrackObservation& o : keyframes[last].observations) {
-      ++candidate.last_keyframe_tracks;
-      candidate.followed_tracks += std::binary_search(followed.begin(), followed.end(), o.track);
-    }
   }
   if (!depths.empty()) {
     std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());

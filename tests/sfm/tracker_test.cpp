@@ -68,6 +68,19 @@ SyntheticDrive MakeDrive(double rig_radius, int num_frames, double noise, double
   return drive;
 }
 
+// RMS distance of the tracker's keyframe centres to the drive's true centres after a similarity
+// registration (metres).
+double KeyframeRmsAfterSimilarity(const Tracker& tracker, const SyntheticDrive& drive) {
+  const std::vector<Rigid3d> poses = tracker.KeyframePoses();
+  const std::vector<int> frames = tracker.KeyframeFrames();
+  std::vector<Eigen::Vector3d> estimated, truth;
+  for (size_t k = 0; k < poses.size(); ++k) {
+    estimated.push_back(poses[k].translation);
+    truth.push_back(drive.world_from_rig[frames[k]].translation);
+  }
+  return AlignmentRms(EstimateSim3Umeyama(estimated, truth, true), estimated, truth);
+}
+
 struct Case {
   bool central;
   double rig_radius;
@@ -110,15 +123,7 @@ TEST_P(TrackerTest, TracksSyntheticDriveWithSmallTrajectoryError) {
 
   // Keyframe centres against the truth after a similarity registration: below 1 % of the
   // distance driven.
-  const std::vector<Rigid3d> poses = tracker.KeyframePoses();
-  const std::vector<int> frames = tracker.KeyframeFrames();
-  std::vector<Eigen::Vector3d> estimated, truth;
-  for (size_t k = 0; k < poses.size(); ++k) {
-    estimated.push_back(poses[k].translation);
-    truth.push_back(drive.world_from_rig[frames[k]].translation);
-  }
-  const Sim3d truth_from_estimated = EstimateSim3Umeyama(estimated, truth, true);
-  const double rms = AlignmentRms(truth_from_estimated, estimated, truth);
+  const double rms = KeyframeRmsAfterSimilarity(tracker, drive);
   EXPECT_LT(rms, 0.01 * drive.length) << "rms " << rms << " m over " << drive.length << " m";
   RecordProperty("keyframes", tracker.NumKeyframes());
   RecordProperty("points", tracker.NumPoints());
@@ -364,11 +369,6 @@ TEST(TrackerFrameRays, ARigStandingStillGivesNoMoreRays) {
 INSTANTIATE_TEST_SUITE_P(Modes, TrackerFrameRaysTest,
                          ::testing::Values(Case{true, 0.05}, Case{false, 0.3}));
 
-// Failures in the middle of a drive: black frames (no observations), a frame whose matches are
-// wrong (track ids shuffled), and a frame from 20 frames later (a jump the motion model cannot
-// explain). Each is reported and skipped; no wrong pose enters the map; the frames after them
-// are tracked again (their tracks are the map's, as after a re-localisation of the front end),
-// and the trajectory stays within 1 % of the distance driven.
 // Tracks that end within a few frames while far points stay (side cameras close to the street):
 // four points in five lose their track every 4 to 11 frames and are found again as new tracks,
 // the others keep theirs as long as the drive sees them. The point rule alone waits for the long
@@ -405,14 +405,7 @@ TEST(TrackerKeyframes, AKeyframeComesBeforeMostShortTracksEnd) {
     tracker.Finish();
     result.keyframes = tracker.NumKeyframes();
     result.points = tracker.NumPoints();
-    std::vector<Eigen::Vector3d> estimated, truth;
-    const std::vector<Rigid3d> poses = tracker.KeyframePoses();
-    const std::vector<int> frames = tracker.KeyframeFrames();
-    for (size_t k = 0; k < poses.size(); ++k) {
-      estimated.push_back(poses[k].translation);
-      truth.push_back(drive.world_from_rig[frames[k]].translation);
-    }
-    result.rms = AlignmentRms(EstimateSim3Umeyama(estimated, truth, true), estimated, truth);
+    result.rms = KeyframeRmsAfterSimilarity(tracker, drive);
     return result;
   };
   const Run without = run(0.0), with = run(0.25);
@@ -429,6 +422,11 @@ TEST(TrackerKeyframes, AKeyframeComesBeforeMostShortTracksEnd) {
   RecordProperty("points_with", with.points);
 }
 
+// Failures in the middle of a drive: black frames (no observations), a frame whose matches are
+// wrong (track ids shuffled), and a frame from 20 frames later (a jump the motion model cannot
+// explain). Each is reported and skipped; no wrong pose enters the map; the frames after them
+// are tracked again (their tracks are the map's, as after a re-localisation of the front end),
+// and the trajectory stays within 1 % of the distance driven.
 TEST(TrackerFailures, ReportsSkipsAndRecoversWithoutAWrongPose) {
   const SyntheticDrive drive = MakeDrive(0.05, 70, 0.0003, 0.03);
   TrackerOptions options;
@@ -719,14 +717,7 @@ ReobservationRun RunWithFragmentedTracks(bool central, double rig_radius, bool s
       for (const FinalizedRay& ray : point.rays)
         run.duplicates += seen.insert({ray.keyframe, ray.camera}).second ? 0 : 1;
     }
-  const std::vector<Rigid3d> poses = tracker.KeyframePoses();
-  const std::vector<int> frames = tracker.KeyframeFrames();
-  std::vector<Eigen::Vector3d> estimated, truth;
-  for (size_t k = 0; k < poses.size(); ++k) {
-    estimated.push_back(poses[k].translation);
-    truth.push_back(drive.world_from_rig[frames[k]].translation);
-  }
-  run.rms = AlignmentRms(EstimateSim3Umeyama(estimated, truth, true), estimated, truth);
+  run.rms = KeyframeRmsAfterSimilarity(tracker, drive);
   return run;
 }
 

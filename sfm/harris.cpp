@@ -5,6 +5,8 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
@@ -78,6 +80,9 @@ struct HarrisBuffers {
   std::vector<int32_t> products;  // one row's products of the derivatives: xx, xy, yy
   std::vector<int32_t> row_sums;  // a ring of three rows' sums of three products, per channel
   cv::Mat response;
+  cv::Mat row_maxima;             // the response's maxima of three along each row
+  std::vector<float> padded_row;  // one response row with −∞ on each side
+  std::vector<uint8_t> marks;     // one row's pixels above the threshold and 3×3 maxima
   std::vector<Corner> candidates;
   std::vector<int> bucket_of;
   std::vector<std::vector<Corner>> buckets;
@@ -175,27 +180,58 @@ void HarrisResponse3x3(const cv::Mat& image, double k, HarrisBuffers* buffers) {
   }
 }
 
-// The threshold scan of DetectHarrisCorners goes by chunks of pixels: a chunk whose responses
-// are all below the threshold is skipped after one branch-free (vectorisable) test.
+// The scan of DetectHarrisCorners goes by chunks of pixels: a chunk without a marked pixel
+// (MarkCandidates) is skipped after one test of its marks as two words.
 constexpr int kScanChunk = 16;
-bool AllBelow(const float* __restrict values, float threshold) {
-  bool below = true;
-  for (int k = 0; k < kScanChunk; ++k) below &= values[k] < threshold;
-  return below;
+bool NoneMarked(const uint8_t* marks) {
+  uint64_t words[2];
+  std::memcpy(words, marks, sizeof(words));
+  return (words[0] | words[1]) == 0;
+}
+
+// The maxima of three along each response row (clipped to the row), for the suppression's
+// 3×3 test of a whole row at once (vectorised).
+void RowMaximaOfThree(const cv::Mat& response, HarrisBuffers* buffers) {
+  const int cols = response.cols;
+  buffers->row_maxima.create(response.rows, cols, CV_32F);
+  std::vector<float>& padded = buffers->padded_row;
+  padded.assign(static_cast<size_t>(cols + 2), -std::numeric_limits<float>::infinity());
+  for (int y = 0; y < response.rows; ++y) {
+    std::copy_n(response.ptr<float>(y), cols, padded.begin() + 1);
+    const float* __restrict in = padded.data();
+    float* __restrict out = buffers->row_maxima.ptr<float>(y);
+    for (int x = 0; x < cols; ++x) {
+      const float left = in[x], centre = in[x + 1], right = in[x + 2];
+      const float side = left < right ? right : left;
+      out[x] = centre < side ? side : centre;
+    }
+  }
+}
+
+// Marks the pixels [x_begin, x_end) of response row y that are at least the threshold and
+// no smaller than any pixel of their 3×3 neighbourhood (clipped to the image), from the rows'
+// maxima of three: the first test of IsLocalMaximum, on a whole row (vectorised).
+void MarkCandidates(const cv::Mat& response, const cv::Mat& row_maxima, int y, int x_begin,
+                    int x_end, float threshold, uint8_t* __restrict marks) {
+  const float* __restrict r = response.ptr<float>(y);
+  const float* __restrict up = row_maxima.ptr<float>(std::max(0, y - 1));
+  const float* __restrict mid = row_maxima.ptr<float>(y);
+  const float* __restrict down = row_maxima.ptr<float>(std::min(response.rows - 1, y + 1));
+  for (int x = x_begin; x < x_end; ++x) {
+    const float value = r[x];
+    const float vertical = up[x] < down[x] ? down[x] : up[x];
+    const float around = mid[x] < vertical ? vertical : mid[x];
+    marks[x] = static_cast<uint8_t>((value >= threshold) & (value >= around));
+  }
 }
 
 // True when response(x, y) is the largest value of the (2 radius + 1)² window around it
 // (clipped to the image): the dilation test of non-maximum suppression, evaluated only where
-// needed. The 3×3 neighbourhood is tried first, which rejects most pixels.
+// needed (on the pixels MarkCandidates marked: most pixels fail its 3×3 test).
 bool IsLocalMaximum(const cv::Mat& response, int x, int y, int radius) {
   const float value = response.ptr<float>(y)[x];
   const int x0 = std::max(0, x - radius), x1 = std::min(response.cols - 1, x + radius);
   const int y0 = std::max(0, y - radius), y1 = std::min(response.rows - 1, y + radius);
-  for (int yy = std::max(y0, y - 1); yy <= std::min(y1, y + 1); ++yy) {
-    const float* row = response.ptr<float>(yy);
-    for (int xx = std::max(x0, x - 1); xx <= std::min(x1, x + 1); ++xx)
-      if (row[xx] > value) return false;
-  }
   for (int yy = y0; yy <= y1; ++yy) {
     const float* row = response.ptr<float>(yy);
     for (int xx = x0; xx <= x1; ++xx)
@@ -323,14 +359,18 @@ std::vector<Corner> DetectHarrisCorners(const cv::Mat& prepared, const HarrisOpt
   std::vector<int> bucket_size(num_cells, 0);
   const int x_begin = options.border, x_end = prepared.cols - options.border;
   const int y_begin = options.border, y_end = prepared.rows - options.border;
+  RowMaximaOfThree(response, &buffers);
+  std::vector<uint8_t>& marks = buffers.marks;
+  marks.assign(static_cast<size_t>(prepared.cols), 0);
   for (int y = y_begin; y < y_end; ++y) {
     const float* r = response.ptr<float>(y);
     const int row = std::min(options.grid_rows - 1, y * options.grid_rows / prepared.rows);
+    MarkCandidates(response, buffers.row_maxima, y, x_begin, x_end, threshold, marks.data());
     for (int x0 = x_begin; x0 < x_end; x0 += kScanChunk) {
       const int x1 = std::min(x0 + kScanChunk, x_end);
-      if (x1 - x0 == kScanChunk && AllBelow(r + x0, threshold)) continue;  // most pixels
+      if (x1 - x0 == kScanChunk && NoneMarked(marks.data() + x0)) continue;  // most pixels
       for (int x = x0; x < x1; ++x) {
-        if (r[x] < threshold) continue;
+        if (!marks[x]) continue;
         if (!IsLocalMaximum(response, x, y, options.min_distance)) continue;
         const int col = std::min(options.grid_cols - 1, x * options.grid_cols / prepared.cols);
         const int cell = row * options.grid_cols + col;

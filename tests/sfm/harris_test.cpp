@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <set>
 
 #include "sfm/synthetic.h"
 #include "tests/calib/options_error_check.h"
@@ -126,6 +127,46 @@ TEST(Harris, SameCornersAsTheReferenceDetector) {
     EXPECT_LE(unmatched, tolerance) << "seed " << seed;
     // Strongest first.
     for (size_t i = 1; i < fast.size(); ++i) EXPECT_GE(fast[i - 1].response, fast[i].response);
+  }
+}
+
+// The suppression at the image's edges (no border: the 3×3 and the wider windows clipped), with
+// several suppression radii, before the subpixel step: the integer maxima of the dilation of
+// OpenCV's response above the threshold.
+TEST(Harris, SameMaximaAsTheDilationUpToTheImageEdges) {
+  const cv::Mat image = NoisyTexture(200, 150, 7);
+  for (const int radius : {1, 2, 4, 7}) {
+    HarrisOptions options;
+    options.border = 0;
+    options.min_distance = radius;
+    options.subpixel_iterations = 0;
+    options.max_corners = 100000;
+    std::set<std::pair<int, int>> fast;
+    for (const Corner& c : DetectHarrisCorners(image, options))
+      fast.insert({static_cast<int>(c.pixel.x()), static_cast<int>(c.pixel.y())});
+    cv::Mat response, dilated;
+    cv::cornerHarris(image, response, options.block_size, options.sobel_aperture, options.harris_k);
+    double max_response = 0.0;
+    cv::minMaxLoc(response, nullptr, &max_response);
+    const float threshold = static_cast<float>(options.quality_level * max_response);
+    cv::dilate(response, dilated,
+               cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * radius + 1, 2 * radius + 1)));
+    std::set<std::pair<int, int>> reference;
+    int on_edge = 0;
+    for (int y = 0; y < image.rows; ++y)
+      for (int x = 0; x < image.cols; ++x) {
+        const float r = response.at<float>(y, x);
+        if (r < threshold || r < dilated.at<float>(y, x)) continue;
+        reference.insert({x, y});
+        on_edge += x < radius || y < radius || x >= image.cols - radius || y >= image.rows - radius;
+      }
+    ASSERT_GT(reference.size(), 50u) << "radius " << radius;
+    EXPECT_GT(on_edge, 0) << "radius " << radius;  // the clipped windows are exercised
+    // The same maxima, but where the two responses' rounding orders a near-tie differently.
+    int differ = 0;
+    for (const auto& pixel : fast) differ += reference.count(pixel) == 0;
+    for (const auto& pixel : reference) differ += fast.count(pixel) == 0;
+    EXPECT_LE(differ, static_cast<int>(0.01 * reference.size())) << "radius " << radius;
   }
 }
 

@@ -273,6 +273,7 @@ void WriteReconstruction(const ReconstructCommandOptions& o, const GlobalOptions
   summary["loop_replay"] = o.loop_replay;
   summary["enclosing"] = o.enclosing;
   summary["prefetch_frames_ahead"] = o.pipeline.sfm.prefetch.frames_ahead;
+  summary["prefetch_thread_nice"] = o.pipeline.sfm.prefetch.thread_nice;
   summary["point_colors_seconds"] = outputs.colors.seconds;
   WriteTextFileAtomically(partial / kSummaryFile, summary.dump(2) + "\n");
   Publish(partial, out);

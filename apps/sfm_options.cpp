@@ -145,6 +145,11 @@ void AddSfmOptions(CLI::App* command, SfmCommandLine* o) {
       ->add_option("--prefetch", o->sfm.prefetch.frames_ahead,
                    "Frames whose images are decoded ahead of the SfM")
       ->capture_default_str();
+  command
+      ->add_option("--prefetch-nice", o->sfm.prefetch.thread_nice,
+                   "The thread that decodes the images and finds their corners ahead of the SfM "
+                   "runs this much nicer than it (0 to 19; 0: the same priority)")
+      ->capture_default_str();
   command->add_flag("!--no-loop-closure", o->sfm.loop_closure,
                     "Do not detect revisits nor correct the drift");
   command->add_flag("!--no-global-ba", o->sfm.loop.global_bundle_adjustment,

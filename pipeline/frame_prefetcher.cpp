@@ -9,11 +9,13 @@
 #include <utility>
 
 #include "calib/error.h"
+#include "pipeline/thread_priority.h"
 
 namespace omni {
 
 std::string FramePrefetcherOptions::Check() const {
   if (frames_ahead < 1) return "frames_ahead: expected at least 1";
+  if (thread_nice < 0 || thread_nice > 19) return "thread_nice: expected 0 to 19";
   return {};
 }
 
@@ -38,6 +40,7 @@ FramePrefetcher::FramePrefetcher(size_t num_frames, Loader loader,
                                  const FramePrefetcherOptions& options, Prepare prepare)
     : num_frames_(num_frames),
       frames_ahead_(static_cast<size_t>(std::max(options.frames_ahead, 1))),
+      thread_nice_(options.thread_nice),
       loader_(std::move(loader)),
       prepare_(std::move(prepare)) {
   ThrowIfInvalid(options.Check(), "FramePrefetcherOptions");
@@ -52,6 +55,7 @@ FramePrefetcher::FramePrefetcher(const Drive& drive, size_t num_frames,
 FramePrefetcher::~FramePrefetcher() { Stop(); }
 
 void FramePrefetcher::Run() {
+  LowerThisThreadPriority(thread_nice_, "image prefetch");
   // The loader's and the prepare step's parallel work runs in an arena of its own: a thread of
   // the consumer waiting in a parallel loop of its own then never picks up a task of this one
   // (TBB lets a waiting thread run any task of its arena), which would make the consumer wait

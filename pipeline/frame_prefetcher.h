@@ -30,6 +30,12 @@ struct FramePrefetcherOptions {
   // Frames decoded ahead of the consumer at most (each holds one image per camera: 6 grey
   // 384x512 images are 1.2 MB). 1: the next frame only.
   int frames_ahead = 4;
+  // The prefetch thread runs this much nicer than the thread that made the prefetcher (Linux
+  // thread niceness, 0 to 19; 0: the same priority). It works ahead of the SfM, which sets the
+  // pace: when both want a core the SfM gets it, and the frames ahead absorb the delay
+  // (docs/figures.md F86). Its parallel work (a frame's cameras) runs on TBB's workers, at
+  // theirs.
+  int thread_nice = 10;
 
   std::string Check() const;
 };
@@ -89,6 +95,7 @@ class FramePrefetcher {
 
   const size_t num_frames_;
   const size_t frames_ahead_;
+  const int thread_nice_;
   Loader loader_;
   Prepare prepare_;
   mutable std::mutex mutex_;

@@ -4,10 +4,8 @@
 
 #include <algorithm>
 #include <atomic>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <exception>
 #include <memory>
 #include <sstream>
@@ -15,15 +13,10 @@
 #include <thread>
 #include <unordered_map>
 
-#ifdef __linux__
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-#endif
-
 #include "calib/error.h"
 #include "pipeline/bounded_queue.h"
 #include "pipeline/keyframe_conversion.h"
+#include "pipeline/thread_priority.h"
 
 namespace omni {
 
@@ -147,21 +140,6 @@ struct QueuedKeyframe {
   Clock::time_point pushed;
 };
 
-// Makes the calling thread `increment` nicer than it is (Linux: niceness is per thread), up to
-// 19; a debug line when the system refuses (the run goes on at the same priority).
-void LowerThisThreadPriority(int increment) {
-  if (increment <= 0) return;
-#ifdef __linux__
-  const auto thread = static_cast<id_t>(syscall(SYS_gettid));
-  errno = 0;
-  const int current = getpriority(PRIO_PROCESS, thread);
-  if (current == -1 && errno != 0) return;
-  if (setpriority(PRIO_PROCESS, thread, std::min(19, current + increment)) != 0)
-    spdlog::debug("reconstruct: the surface thread's priority was not lowered: {}",
-                  std::strerror(errno));
-#endif
-}
-
 }  // namespace
 
 PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
@@ -210,7 +188,7 @@ PipelineResult RunPipeline(const Drive& drive, const PipelineOptions& options,
   });
 
   std::thread surface_thread([&] {
-    LowerThisThreadPriority(options.surface_thread_nice);
+    LowerThisThreadPriority(options.surface_thread_nice, "surface");
     try {
       auto sculptor = std::make_unique<IncrementalSculptor>(options.sculptor);
       std::unordered_map<uint32_t, double> queue_ms;

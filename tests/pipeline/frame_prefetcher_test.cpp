@@ -5,7 +5,11 @@
 #include "pipeline/frame_prefetcher.h"
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
@@ -51,6 +55,37 @@ TEST(PipelineFramePrefetcher, OptionsAreChecked) {
             3, [](size_t frame) { return FakeImages(frame, 1); }, options);
       },
       "FramePrefetcherOptions.frames_ahead: expected"));
+}
+
+// The niceness of the prefetch thread, read by the loader (which runs on it).
+int PrefetchThreadNiceness(int thread_nice) {
+  FramePrefetcherOptions options;
+  options.thread_nice = thread_nice;
+  std::atomic<int> niceness{-100};
+  FramePrefetcher prefetcher(
+      1,
+      [&niceness](size_t frame) {
+        niceness = getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)));
+        return FakeImages(frame, 1);
+      },
+      options);
+  EXPECT_TRUE(prefetcher.Next().has_value());
+  return niceness;
+}
+
+// The prefetch thread runs thread_nice nicer than the thread that made the prefetcher (capped
+// at 19); 0 leaves it at the same priority; the caller's own priority is untouched.
+TEST(PipelineFramePrefetcher, ThePrefetchThreadRunsNicerThanItsConsumer) {
+  const int base = getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)));
+  EXPECT_EQ(PrefetchThreadNiceness(0), base);
+  EXPECT_EQ(PrefetchThreadNiceness(4), std::min(19, base + 4));
+  EXPECT_EQ(PrefetchThreadNiceness(19), 19);
+  EXPECT_EQ(getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid))), base);
+  FramePrefetcherOptions options;
+  options.thread_nice = 20;
+  EXPECT_NE(options.Check().find("thread_nice: expected 0 to 19"), std::string::npos);
+  options.thread_nice = -1;
+  EXPECT_FALSE(options.Check().empty());
 }
 
 TEST(PipelineFramePrefetcher, DeliversEveryFrameInOrderWithItsImages) {

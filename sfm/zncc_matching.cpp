@@ -44,24 +44,40 @@ double Dot(const float* a, const float* b, int area) {
   return (s0 + s1) + (s2 + s3);
 }
 
+// Where InterpolatedWindow samples the window centred at `pixel`: its top-left sample at
+// (ix + a, iy + b); false when the window or its interpolation neighbours leave the image.
+struct WindowPlace {
+  int ix = 0, iy = 0;
+  float a = 0.f, b = 0.f;
+};
+bool PlaceWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int half_window,
+                 WindowPlace* place) {
+  const double margin = half_window + 1.0;
+  if (!(pixel.x() >= margin && pixel.y() >= margin && pixel.x() <= image.cols - 1 - margin &&
+        pixel.y() <= image.rows - 1 - margin))
+    return false;
+  // Top-left sample; with the margin above, the window and its interpolation neighbours are
+  // inside the image.
+  const double x = pixel.x() - half_window, y = pixel.y() - half_window;
+  place->ix = static_cast<int>(std::floor(x));
+  place->iy = static_cast<int>(std::floor(y));
+  place->a = static_cast<float>(x - place->ix);
+  place->b = static_cast<float>(y - place->iy);
+  return true;
+}
+
 // The bilinear samples of the (2 half_window + 1)² window centred at `pixel` into `values`
 // (row-major); false when the window or its interpolation neighbours leave the image.
 // Separable (internal::SampleBilinearGrid).
 bool InterpolatedWindow(const cv::Mat& image, const Eigen::Vector2d& pixel, int half_window,
                         float* __restrict values) {
-  const double margin = half_window + 1.0;
-  if (!(pixel.x() >= margin && pixel.y() >= margin && pixel.x() <= image.cols - 1 - margin &&
-        pixel.y() <= image.rows - 1 - margin))
-    return false;
+  WindowPlace place;
+  if (!PlaceWindow(image, pixel, half_window, &place)) return false;
   const int size = 2 * half_window + 1;
-  // Top-left sample; with the margin above, the window and its interpolation neighbours are
-  // inside the image.
-  const double x = pixel.x() - half_window, y = pixel.y() - half_window;
-  const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
-  const float a = static_cast<float>(x - ix), b = static_cast<float>(y - iy);
   thread_local std::vector<float> rows;
   rows.resize(static_cast<size_t>(size + 1) * size);
-  internal::SampleBilinearGrid(image, ix, iy, a, b, size, rows.data(), values);
+  internal::SampleBilinearGrid(image, place.ix, place.iy, place.a, place.b, size, rows.data(),
+                               values);
   return true;
 }
 
@@ -109,18 +125,63 @@ double CentredNorm(const WindowSums& sums, int area) {
 }
 
 // The ZNCC of window1 (a normalised window: zero mean, unit norm; its sum window1_sum) with the
-// image's window centred at `pixel`, without normalising the second window: with d = v − shift,
+// window `values` of the second image, without normalising the second window: with
+// d = v − shift,
 //   Σ w1 (v − mean) / ‖v − mean‖ = (Σ w1 d − (mean − shift) Σ w1) / ‖v − mean‖.
-// NaN where NormalisedWindow fails (the window leaves the image or is flat).
+// NaN where the window is flat.
+double ZnccWithValues(const float* window1, double window1_sum, const float* values, int area) {
+  const WindowSums sums = SumWindow<true>(values, window1, area, values[0]);
+  const double norm = CentredNorm(sums, area);
+  return (sums.dot - sums.sum / area * window1_sum) / norm;
+}
+
+// ZnccWithValues on the image's window centred at `pixel`; NaN where the window leaves the image.
 double ZnccWithWindow(const float* window1, double window1_sum, const cv::Mat& image,
                       const Eigen::Vector2d& pixel, int half_window) {
   const int size = 2 * half_window + 1, area = size * size;
   thread_local std::vector<float> values;
   values.resize(area);
   if (!InterpolatedWindow(image, pixel, half_window, values.data())) return kNaN;
-  const WindowSums sums = SumWindow<true>(values.data(), window1, area, values[0]);
-  const double norm = CentredNorm(sums, area);
-  return (sums.dot - sums.sum / area * window1_sum) / norm;
+  return ZnccWithValues(window1, window1_sum, values.data(), area);
+}
+
+// The ZNCCs of window1 with the windows centred at `minus` and `plus` (ZnccWithWindow each).
+// When the two windows are one pixel apart along `axis` (0: x, 1: y) on the same subpixel
+// grid, as the refinement's samples half a pixel either side of a point are, both come from one
+// grid one pixel wider: the same samples to the bit, for about half the interpolation.
+void ZnccPair(const float* window1, double window1_sum, const cv::Mat& image,
+              const Eigen::Vector2d& minus, const Eigen::Vector2d& plus, int axis, int half_window,
+              double* zncc_minus, double* zncc_plus) {
+  WindowPlace m, p;
+  const bool shared =
+      PlaceWindow(image, minus, half_window, &m) && PlaceWindow(image, plus, half_window, &p) &&
+      m.a == p.a && m.b == p.b &&
+      (axis == 0 ? p.ix == m.ix + 1 && p.iy == m.iy : p.iy == m.iy + 1 && p.ix == m.ix);
+  if (!shared) {
+    *zncc_minus = ZnccWithWindow(window1, window1_sum, image, minus, half_window);
+    *zncc_plus = ZnccWithWindow(window1, window1_sum, image, plus, half_window);
+    return;
+  }
+  const int size = 2 * half_window + 1, area = size * size;
+  const int width = axis == 0 ? size + 1 : size, height = axis == 0 ? size : size + 1;
+  thread_local std::vector<float> rows, grid, values;
+  rows.resize(static_cast<size_t>(height + 1) * width);
+  grid.resize(static_cast<size_t>(width) * height);
+  internal::SampleBilinearRect(image, m.ix, m.iy, m.a, m.b, width, height, rows.data(),
+                               grid.data());
+  if (axis == 1) {  // the two windows are the grid's first and last `size` rows
+    *zncc_minus = ZnccWithValues(window1, window1_sum, grid.data(), area);
+    *zncc_plus = ZnccWithValues(window1, window1_sum, grid.data() + size, area);
+    return;
+  }
+  values.resize(area);
+  for (int shift = 0; shift <= 1; ++shift) {
+    for (int r = 0; r < size; ++r)
+      std::copy_n(grid.data() + static_cast<size_t>(r) * width + shift, size,
+                  values.data() + static_cast<size_t>(r) * size);
+    (shift == 0 ? *zncc_minus : *zncc_plus) =
+        ZnccWithValues(window1, window1_sum, values.data(), area);
+  }
 }
 
 // Moves pixel2 to the subpixel maximum of the ZNCC between window1 and the second image's
@@ -148,8 +209,12 @@ double RefineSubpixel(const float* window1, const cv::Mat& image2, const ZnccOpt
   for (int iteration = 0; iteration < options.subpixel_iterations; ++iteration) {
     if (std::isnan(centre)) break;
     const Eigen::Vector2d dx(h, 0.0), dy(0.0, h);
-    const Eigen::Vector2d step(vertex(score_at(best - dx), centre, score_at(best + dx)),
-                               vertex(score_at(best - dy), centre, score_at(best + dy)));
+    double minus_x, plus_x, minus_y, plus_y;
+    ZnccPair(window1, window1_sum, image2, best - dx, best + dx, 0, options.half_window, &minus_x,
+             &plus_x);
+    ZnccPair(window1, window1_sum, image2, best - dy, best + dy, 1, options.half_window, &minus_y,
+             &plus_y);
+    const Eigen::Vector2d step(vertex(minus_x, centre, plus_x), vertex(minus_y, centre, plus_y));
     const Eigen::Vector2d candidate = best + step;
     const double candidate_score = score_at(candidate);
     if (!(candidate_score > std::max(best_score, centre))) break;

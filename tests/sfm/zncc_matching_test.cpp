@@ -3,10 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstring>
 #include <opencv2/imgproc.hpp>
 #include <random>
 
 #include "sfm/harris.h"
+#include "sfm/internal/bilinear_grid.h"
 #include "sfm/synthetic.h"
 
 namespace omni {
@@ -234,6 +236,37 @@ TEST_P(ZnccShiftTest, FindsKnownShift) {
 INSTANTIATE_TEST_SUITE_P(Shifts, ZnccShiftTest,
                          ::testing::Values(Eigen::Vector2d(3.0, -2.0), Eigen::Vector2d(-5.0, 4.0),
                                            Eigen::Vector2d(2.4, 1.7), Eigen::Vector2d(-0.5, 3.25)));
+
+// The subpixel refinement takes its two windows half a pixel either side of a point from one
+// grid a pixel wider (or taller): each of its windows must be, to the bit, the square grid
+// sampled at its own place.
+TEST(Zncc, AWiderBilinearGridHoldsBothWindowsToTheBit) {
+  const cv::Mat image = MakeSyntheticTexture(120, 100, Eigen::Vector2d::Zero(), 40, 9);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> fraction(0.f, 1.f);
+  std::uniform_int_distribution<int> column(0, 100), row(0, 80);
+  for (const int size : {7, 11, 13}) {
+    std::vector<float> rows((size + 2) * (size + 1)), wide((size + 1) * size),
+        tall(size * (size + 1)), square(size * size), window(size * size);
+    for (int k = 0; k < 200; ++k) {
+      const int ix = column(rng) % (image.cols - size - 2), iy = row(rng) % (image.rows - size - 2);
+      const float a = fraction(rng), b = fraction(rng);
+      internal::SampleBilinearRect(image, ix, iy, a, b, size + 1, size, rows.data(), wide.data());
+      internal::SampleBilinearRect(image, ix, iy, a, b, size, size + 1, rows.data(), tall.data());
+      for (int shift = 0; shift <= 1; ++shift) {
+        internal::SampleBilinearGrid(image, ix + shift, iy, a, b, size, rows.data(), square.data());
+        for (int r = 0; r < size; ++r)
+          std::copy_n(wide.begin() + r * (size + 1) + shift, size, window.begin() + r * size);
+        ASSERT_EQ(0, std::memcmp(window.data(), square.data(), sizeof(float) * size * size))
+            << "along x, size " << size << ", shift " << shift;
+        internal::SampleBilinearGrid(image, ix, iy + shift, a, b, size, rows.data(), square.data());
+        ASSERT_EQ(
+            0, std::memcmp(tall.data() + shift * size, square.data(), sizeof(float) * size * size))
+            << "along y, size " << size << ", shift " << shift;
+      }
+    }
+  }
+}
 
 TEST(Zncc, InvariantToGainAndOffset) {
   const cv::Mat image = MakeSyntheticTexture(120, 100, Eigen::Vector2d::Zero(), 40, 2);

@@ -57,6 +57,10 @@ TEST(PipelineFramePrefetcher, OptionsAreChecked) {
       "FramePrefetcherOptions.frames_ahead: expected"));
 }
 
+int ThisThreadNiceness() {
+  return getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)));
+}
+
 // The niceness of the prefetch thread, read by the loader (which runs on it).
 int PrefetchThreadNiceness(int thread_nice) {
   FramePrefetcherOptions options;
@@ -65,7 +69,7 @@ int PrefetchThreadNiceness(int thread_nice) {
   FramePrefetcher prefetcher(
       1,
       [&niceness](size_t frame) {
-        niceness = getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)));
+        niceness = ThisThreadNiceness();
         return FakeImages(frame, 1);
       },
       options);
@@ -76,11 +80,11 @@ int PrefetchThreadNiceness(int thread_nice) {
 // The prefetch thread runs thread_nice nicer than the thread that made the prefetcher (capped
 // at 19); 0 leaves it at the same priority; the caller's own priority is untouched.
 TEST(PipelineFramePrefetcher, ThePrefetchThreadRunsNicerThanItsConsumer) {
-  const int base = getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)));
+  const int base = ThisThreadNiceness();
   EXPECT_EQ(PrefetchThreadNiceness(0), base);
   EXPECT_EQ(PrefetchThreadNiceness(4), std::min(19, base + 4));
   EXPECT_EQ(PrefetchThreadNiceness(19), 19);
-  EXPECT_EQ(getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid))), base);
+  EXPECT_EQ(ThisThreadNiceness(), base);
   FramePrefetcherOptions options;
   options.thread_nice = 20;
   EXPECT_NE(options.Check().find("thread_nice: expected 0 to 19"), std::string::npos);

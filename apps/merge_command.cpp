@@ -166,6 +166,7 @@ void RunMerge(MergeCommandOptions& o, const GlobalOptions& global) {
   const std::vector<SurfaceKeyframe> stream = ColmapKeyframes(merged.model, &point_colors, &up);
   std::vector<ColmapFrameRayPoint>().swap(merged.model.frame_rays);  // in the stream now
   o.sculptor.up = up;
+  o.sculptor.pixel_angle = ColmapFinestPixelAngle(merged.model);
   // With the final batch (the default) only that batch is sculpted: the keyframe-by-keyframe
   // surface before it would not be written (SculptBatchOnly).
   FinalBatch batch = o.final_batch ? SculptBatchOnly(o.sculptor, stream) : FinalBatch{};

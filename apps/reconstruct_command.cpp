@@ -317,6 +317,7 @@ void RunReconstruct(ReconstructCommandOptions& o, const GlobalOptions& global) {
   ApplyEnclosingOption(o.enclosing, &o.pipeline.sculptor);
   const Drive drive = Drive::Open(o.drive);
   const Rig& rig = drive.rig();
+  o.pipeline.sculptor.pixel_angle = rig.FinestPixelAngle();
   ApplySfmOptions(rig, "reconstruct", &o.sfm);
   ApplyFrameRange(drive, &o.sfm);
   o.pipeline.sfm = o.sfm.sfm;

@@ -234,15 +234,19 @@ void RunSurface(SurfaceCommandOptions& o, const GlobalOptions& global) {
   std::vector<size_t> keyframe_frames;      // known for --from-gt only
   std::unordered_map<PointId, Rgb8> point_colors;
   Eigen::Vector3d colmap_up = Eigen::Vector3d::UnitZ();
+  double model_pixel_angle = 0.0;
   std::vector<SurfaceKeyframe> stream;
   if (o.colmap.empty()) {
     stream = LoadGtKeyframes(o.from_gt, o.gt, nullptr, &keyframe_poses, &keyframe_frames);
   } else {
     const ColmapModel model = ReadColmapModel(o.colmap);
     stream = ColmapKeyframes(model, &point_colors, &colmap_up);
+    model_pixel_angle = ColmapFinestPixelAngle(model);
     if (!o.drive.empty()) keyframe_poses = ColmapPosesOnDrive(model, o.drive, o.frame_rate);
   }
   if (o.colmap.empty()) point_colors = GtPointColors(o.from_gt, stream, keyframe_frames);
+  o.sculptor.pixel_angle =
+      o.colmap.empty() ? Drive::Open(o.from_gt).rig().FinestPixelAngle() : model_pixel_angle;
   // A COLMAP world has no up axis: the ground filter's up from its cameras.
   if (!o.colmap.empty()) {
     o.sculptor.up = colmap_up;
@@ -498,6 +502,16 @@ void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
                    "A point closer than this times s to a vertex is that vertex (0: exact "
                    "duplicates only)")
       ->capture_default_str();
+  command
+      ->add_option("--min-point-separation-pixels", sculptor->min_point_separation_pixels,
+                   "A point is also a vertex less than this many pixels from it, as the "
+                   "nearest camera that sees the point sees them (the finest camera's pixel; 0: "
+                   "off)")
+      ->capture_default_str();
+  command->add_flag_callback(
+      "--drop-duplicate-rays", [sculptor] { sculptor->duplicate_rays = false; },
+      "A point merged into a vertex (--min-point-separation) is dropped with its rays (default: "
+      "its rays are traced from that vertex)");
   command
       ->add_option("--reach-quantile", sculptor->reach_quantile,
                    "s is at least the first keyframes' points' distance to their keyframe at "

@@ -1,6 +1,7 @@
 #include "calib/colmap_text.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <iomanip>
 #include <limits>
@@ -225,6 +226,14 @@ ColmapTextModel ReadColmapText(const std::filesystem::path& folder) {
   if (std::filesystem::exists(folder / "frame_rays.txt"))
     text.frame_rays = ReadInputFile(folder / "frame_rays.txt");
   return text;
+}
+
+double ColmapFinestPixelAngle(const ColmapModel& model) {
+  double focal = 0.0;
+  for (const ColmapCamera& camera : model.cameras) {
+    if (!camera.params.empty()) focal = std::max(focal, camera.params[0]);
+  }
+  return focal > 0.0 ? 1.0 / focal : 0.0;
 }
 
 ColmapModel ReadColmapModel(const std::filesystem::path& folder) {

@@ -99,6 +99,9 @@ ColmapModel ParseColmapModel(const ColmapTextModel& text, const std::filesystem:
 // Reads FOLDER/cameras.txt, images.txt and points3D.txt (InputError when one is missing), and
 // FOLDER/frame_rays.txt when it exists.
 ColmapModel ReadColmapModel(const std::filesystem::path& folder);
+// The angle one pixel spans at the centre of the model's finest camera (radians; 1 / the
+// largest focal length, the first parameter of every COLMAP camera model); 0 without cameras.
+double ColmapFinestPixelAngle(const ColmapModel& model);
 ColmapTextModel ReadColmapText(const std::filesystem::path& folder);
 // The files' text (full precision), and the files written atomically into `folder` (created);
 // frame_rays.txt only when the model has frame rays.

@@ -20,6 +20,12 @@ double Rig::MaxCenterOffset() const {
   return offset;
 }
 
+double Rig::FinestPixelAngle() const {
+  double focal = 0.0;
+  for (const Camera& camera : cameras) focal = std::max({focal, camera.fx(), camera.fy()});
+  return focal > 0.0 ? 1.0 / focal : 0.0;
+}
+
 std::optional<size_t> Rig::FindCamera(const std::string& camera_name) const {
   for (size_t i = 0; i < cameras.size(); ++i)
     if (cameras[i].name == camera_name) return i;

@@ -22,6 +22,9 @@ struct Rig {
   // Largest distance from a camera centre to CentralCenterInRig(): how wrong the central
   // approximation is, to compare with the scene depth.
   double MaxCenterOffset() const;
+  // The angle one pixel spans at the centre of the finest camera (radians; 1 / the largest
+  // focal length in pixels).
+  double FinestPixelAngle() const;
   std::optional<size_t> FindCamera(const std::string& camera_name) const;
   // Empty when valid (at least one camera, unique names, every camera valid).
   std::string Check() const;

@@ -38,6 +38,10 @@ std::string SculptorOptions::Check() const {
   if (!(min_point_separation_factor >= 0.0 && min_point_separation_factor < 1.0)) {
     return "min_point_separation_factor must be in [0, 1)";
   }
+  if (!(min_point_separation_pixels >= 0.0 && min_point_separation_pixels <= 100.0)) {
+    return "min_point_separation_pixels must be in [0, 100]";
+  }
+  if (!(pixel_angle >= 0.0 && pixel_angle < 0.1)) return "pixel_angle must be in [0, 0.1)";
   if (!(below_ground_factor >= 0.0)) return "below_ground_factor must be >= 0";
   if (!(reach_quantile >= 0.0 && reach_quantile <= 1.0)) return "reach_quantile must be in [0, 1]";
   if (!(ground_quantile >= 0.0 && ground_quantile <= 1.0)) {
@@ -98,7 +102,7 @@ std::string KeyframeStatsCsvHeader() {
          "points_filtered_length,points_filtered_aperture,enclose_rounds,cells_e_added,"
          "cells_active,smoothing_candidates,cells_grow_extra,old_ray_facets,"
          "old_ray_facets_uncrossed,old_ray_queries,old_ray_query_voxels,old_ray_facet_tests,"
-         "old_ray_plane_passes,cells_enclosed_free,ms_enclosed_free,keyframes";
+         "old_ray_plane_passes,cells_enclosed_free,ms_enclosed_free,keyframes,points_merged";
 }
 
 std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
@@ -119,7 +123,7 @@ std::string KeyframeStatsCsvRow(const KeyframeStats& s) {
     << s.cells_grow_extra << ',' << s.old_ray_facets << ',' << s.old_ray_facets_uncrossed << ','
     << s.old_ray_queries << ',' << s.old_ray_query_voxels << ',' << s.old_ray_facet_tests << ','
     << s.old_ray_plane_passes << ',' << s.cells_enclosed_free << ',' << s.ms_enclosed_free << ','
-    << s.keyframes;
+    << s.keyframes << ',' << s.points_merged;
   return o.str();
 }
 
@@ -181,6 +185,9 @@ struct PointRecord {
   std::vector<Eigen::Vector3d> origins;
   uint32_t first_ray = 0;  // the rays of the point are first_ray, first_ray + 1, ... (ray ids)
   uint32_t n_stamp = 0;    // equal to the current stamp when the vertex is a vertex of N
+  // The next record of the same vertex (a duplicate merged into it, SculptorOptions::
+  // duplicate_rays), -1 for none: the vertex's info names the first.
+  int next_of_vertex = -1;
 };
 
 struct KeyframeRecord {
@@ -536,9 +543,12 @@ struct IncrementalSculptor::Impl {
 
   // Inserts p unless its conflict zone meets O (§4.3). Returns the new vertex, or a null handle
   // (rejected) with *duplicate telling whether p is an existing vertex.
-  VertexHandle InsertFree(const Point& p, CellHandle& hint, bool* duplicate,
-                          KeyframeStats* verify_stats = nullptr) {
+  // *duplicate: p is an existing vertex, or closer than `separation` to one; *merged_into is
+  // then that vertex.
+  VertexHandle InsertFree(const Point& p, double separation, CellHandle& hint, bool* duplicate,
+                          VertexHandle* merged_into, KeyframeStats* verify_stats = nullptr) {
     *duplicate = false;
+    *merged_into = VertexHandle();
     if (t.tri.dimension() < 3) {  // no cell yet, so no O: plain insertion
       const size_t before = t.tri.number_of_vertices();
       const VertexHandle v = t.tri.insert(p, hint);
@@ -555,14 +565,15 @@ struct IncrementalSculptor::Impl {
     const CellHandle c = t.tri.locate(p, lt, li, lj, hint);
     if (lt == internal::Delaunay::VERTEX) {
       *duplicate = true;
+      *merged_into = c->vertex(li);
       return VertexHandle();
     }
-    if (options.min_point_separation_factor > 0.0) {
-      const double separation = options.min_point_separation_factor * s;
+    if (separation > 0.0) {
       const VertexHandle nearest = t.tri.nearest_vertex(p, c);
       if (nearest != VertexHandle() && !t.tri.is_infinite(nearest) &&
           CGAL::squared_distance(nearest->point(), p) < separation * separation) {
         *duplicate = true;
+        *merged_into = nearest;
         return VertexHandle();
       }
     }
@@ -619,7 +630,9 @@ struct IncrementalSculptor::Impl {
     CellHandle hint = t.vertices.empty() ? CellHandle() : t.vertices.back()->cell();
     for (const Point& g : todo) {
       bool duplicate;
-      const VertexHandle v = InsertFree(g, hint, &duplicate);
+      VertexHandle merged_into;
+      const VertexHandle v =
+          InsertFree(g, options.min_point_separation_factor * s, hint, &duplicate, &merged_into);
       if (v != VertexHandle()) {
         t.AddVertex(v, -1, true);
         ++added;
@@ -1159,10 +1172,11 @@ struct IncrementalSculptor::Impl {
       for (int i = 0; i < 4; ++i) {
         const VertexHandle v = c->vertex(i);
         if (t.tri.is_infinite(v) || v->info().point < 0) continue;
-        PointRecord& p = points[v->info().point];
-        if (p.n_stamp == date) continue;
-        p.n_stamp = date;
-        n_points.push_back(v->info().point);
+        if (points[v->info().point].n_stamp == date) continue;
+        for (int record = v->info().point; record >= 0; record = points[record].next_of_vertex) {
+          points[record].n_stamp = date;
+          n_points.push_back(record);
+        }
       }
     }
     if (options.old_rays == OldRayTracing::kAllRays) return;
@@ -1343,8 +1357,15 @@ struct IncrementalSculptor::Impl {
     return total;
   }
 
+  // v: a vertex just inserted for p, or the vertex p was merged into (its rays are then traced
+  // from v, the record chained after v's others).
   int AddPoint(const SurfacePoint& p, VertexHandle v, KeyframeRecord& kf) {
     v = t.AddVertex(v, static_cast<int32_t>(points.size()), false);
+    if (v->info().point != static_cast<int32_t>(points.size())) {
+      int last = v->info().point;
+      while (points[last].next_of_vertex >= 0) last = points[last].next_of_vertex;
+      points[last].next_of_vertex = static_cast<int>(points.size());
+    }
     PointRecord rec;
     rec.id = p.id;
     rec.vertex = v;
@@ -1356,6 +1377,33 @@ struct IncrementalSculptor::Impl {
     points.push_back(std::move(rec));
     kf.points.push_back(static_cast<int>(points.size()) - 1);
     return kf.points.back();
+  }
+
+  // The distance under which p is a vertex already (SculptorOptions::min_point_separation_*).
+  double Separation(const SurfacePoint& p) const {
+    double separation = options.min_point_separation_factor * s;
+    if (options.min_point_separation_pixels > 0.0 && options.pixel_angle > 0.0) {
+      double nearest = std::numeric_limits<double>::infinity();
+      for (const SurfaceRay& ray : p.rays)
+        nearest = std::min(nearest, (ray.origin - p.position).norm());
+      if (std::isfinite(nearest)) {
+        separation = std::max(separation,
+                              options.min_point_separation_pixels * options.pixel_angle * nearest);
+      }
+    }
+    return separation;
+  }
+
+  // A duplicate point's rays, from the vertex it was merged into (SculptorOptions::
+  // duplicate_rays), when that vertex holds a point (not a Steiner vertex).
+  void AddMergedPoint(const SurfacePoint& p, VertexHandle merged_into, KeyframeRecord& kf,
+                      KeyframeStats& st) {
+    if (!options.duplicate_rays || merged_into == VertexHandle() ||
+        t.tri.is_infinite(merged_into) || merged_into->info().point < 0) {
+      return;
+    }
+    AddPoint(p, merged_into, kf);
+    ++st.points_merged;
   }
 
   // ---- One keyframe, paper §4 steps 1–6 ----
@@ -1464,9 +1512,11 @@ struct IncrementalSculptor::Impl {
       CellHandle hint = t.tri.locate(ToCgal(group[g]->centre));
       for (const auto& [pt, p] : sorted) {
         bool duplicate;
-        const VertexHandle v = InsertFree(pt, hint, &duplicate, &st);
+        VertexHandle merged_into;
+        const VertexHandle v = InsertFree(pt, Separation(*p), hint, &duplicate, &merged_into, &st);
         if (v == VertexHandle()) {
           ++(duplicate ? st.points_duplicate : st.points_rejected);
+          if (duplicate) AddMergedPoint(*p, merged_into, rec, st);
           continue;
         }
         AddPoint(*p, v, rec);
@@ -1554,9 +1604,11 @@ struct IncrementalSculptor::Impl {
       CellHandle hint = t.tri.locate(ToCgal(kf.centre));
       for (const auto& [pt, p] : sorted) {
         bool duplicate;
-        const VertexHandle v = InsertFree(pt, hint, &duplicate);  // O is empty: never rejected
+        VertexHandle merged_into;  // O is empty: never rejected
+        const VertexHandle v = InsertFree(pt, Separation(*p), hint, &duplicate, &merged_into);
         if (v == VertexHandle()) {
           ++(duplicate ? st.points_duplicate : st.points_rejected);
+          if (duplicate) AddMergedPoint(*p, merged_into, rec, st);
           continue;
         }
         AddPoint(*p, v, rec);
@@ -1757,7 +1809,10 @@ TriangleMesh IncrementalSculptor::ExtractMesh(std::vector<PointId>* vertex_point
 std::vector<PointId> IncrementalSculptor::InsertedPoints() const {
   std::vector<PointId> ids;
   ids.reserve(impl_->points.size());
-  for (const PointRecord& point : impl_->points) ids.push_back(point.id);
+  for (size_t i = 0; i < impl_->points.size(); ++i) {
+    const PointRecord& point = impl_->points[i];
+    if (point.vertex->info().point == static_cast<int32_t>(i)) ids.push_back(point.id);
+  }
   return ids;
 }
 
@@ -1771,8 +1826,20 @@ TriangleMesh IncrementalSculptor::ExtractObservedMesh(std::vector<PointId>* vert
     return m.options.smoothing.enabled ? m.smoother.Position(v) : ToEigen(v->point());
   });
   std::vector<ObservedVertex> vertices(records.size());
+  // A vertex with points merged into it is seen from all of their origins.
+  std::vector<std::vector<Eigen::Vector3d>> merged_origins;
+  merged_origins.reserve(records.size());
   for (size_t i = 0; i < records.size(); ++i) {
-    if (records[i] >= 0) vertices[i].origins = &m.points[records[i]].origins;
+    if (records[i] < 0) continue;
+    const PointRecord& first = m.points[records[i]];
+    if (first.next_of_vertex < 0) {
+      vertices[i].origins = &first.origins;
+      continue;
+    }
+    std::vector<Eigen::Vector3d>& origins = merged_origins.emplace_back();
+    for (int r = records[i]; r >= 0; r = m.points[r].next_of_vertex)
+      origins.insert(origins.end(), m.points[r].origins.begin(), m.points[r].origins.end());
+    vertices[i].origins = &origins;
   }
   std::vector<int> kept;
   TriangleMesh observed =

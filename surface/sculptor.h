@@ -151,6 +151,17 @@ struct SculptorOptions {
   // give the triangulation needle cells. SfM points that close are one point. 0: exact
   // duplicates only.
   double min_point_separation_factor = 1e-3;
+  // A point is also that vertex when the two are less than this many pixels apart as the
+  // nearest of the point's ray origins sees them (an angle: min_point_separation_pixels ×
+  // pixel_angle times the distance to that origin): two points the cameras cannot tell apart.
+  // Scale-free and resolution-aware where the factor above is neither; 0: off.
+  double min_point_separation_pixels = 3.0;
+  // The angle a pixel spans (radians) in the finest camera that gave the points, set by the
+  // caller from the rig (Rig::FinestPixelAngle); 0: unknown, min_point_separation_pixels unused.
+  double pixel_angle = 0.0;
+  // A point merged into a vertex (a duplicate above) keeps its rays: they are traced from that
+  // vertex, as the rays of a point there. false: the duplicate is dropped with its rays.
+  bool duplicate_rays = true;
   // Point filters of §5.1.
   bool filter_points = true;
   // Reject (p − c_t)·up < −b, b = max(below_ground_factor · s, g + ground_margin_factor · s)
@@ -261,6 +272,7 @@ struct KeyframeStats {
   size_t points_added = 0;      // inserted in T
   size_t points_rejected = 0;   // conflict zone met O (§4.3)
   size_t points_duplicate = 0;  // an existing vertex, or within min_point_separation_factor · s
+  size_t points_merged = 0;     // of the duplicates, those whose rays were kept (duplicate_rays)
   size_t steiner_added = 0;
   size_t rays_new = 0;                           // rays of the new points, traced fully
   size_t rays_old = 0;                           // older rays re-traced over N (§4.4)
@@ -372,7 +384,7 @@ class IncrementalSculptor {
   TriangleMesh ExtractObservedMesh(std::vector<PointId>* vertex_points = nullptr,
                                    ObservedMeshStats* stats = nullptr) const;
   // The points inserted so far, in their order: those the §5.1 filters kept and whose conflict
-  // zone did not meet O (the "points added" of KeyframeStats).
+  // zone did not meet O (the "points added" of KeyframeStats; not those merged into a vertex).
   std::vector<PointId> InsertedPoints() const;
   // The output position of the Delaunay vertex (DelaunayMesh index): smoothed, or its own.
   Eigen::Vector3d SurfacePosition(int vertex) const;

@@ -107,7 +107,7 @@ const char* const kColumns =
     "points_filtered_aperture,enclose_rounds,cells_e_added,cells_active,smoothing_candidates,"
     "cells_grow_extra,old_ray_facets,old_ray_facets_uncrossed,old_ray_queries,"
     "old_ray_query_voxels,old_ray_facet_tests,old_ray_plane_passes,cells_enclosed_free,"
-    "ms_enclosed_free,keyframes";
+    "ms_enclosed_free,keyframes,points_merged";
 
 TEST_F(SurfaceCommandTest, TinyDriveGivesAClosedOrientedManifoldAndOneStatsRowPerKeyframe) {
   const fs::path drive = TinyDrive("drive", 12);

@@ -38,6 +38,17 @@ TEST(Rig, CentralCenterOfTwoCameras) {
   EXPECT_FALSE(rig.FindCamera("up").has_value());
 }
 
+TEST(Rig, FinestPixelAngleIsThatOfTheLongestFocalLength) {
+  Rig rig;
+  EXPECT_EQ(rig.FinestPixelAngle(), 0.0);
+  rig.cameras.push_back(MakeCamera("wide", Rigid3d()));
+  rig.cameras.push_back(MakeCamera("tele", Rigid3d()));
+  rig.cameras[1].params = {800.0, 820.0, 255.5, 191.5};
+  EXPECT_DOUBLE_EQ(rig.FinestPixelAngle(), 1.0 / 820.0);
+  rig.cameras[1].params[1] = 790.0;
+  EXPECT_DOUBLE_EQ(rig.FinestPixelAngle(), 1.0 / 800.0);
+}
+
 TEST(Rig, SingleCameraIsValidAndCentral) {
   Rig rig;
   rig.cameras.push_back(MakeCamera(

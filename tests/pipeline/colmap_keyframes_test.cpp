@@ -73,6 +73,15 @@ TEST(ColmapKeyframes, ValidModelReads) {
   EXPECT_EQ(ParseColmapKeyframes(model, "m").size(), 2u);
 }
 
+// The pixel of the finest camera: the first parameter is the focal length in every COLMAP model.
+TEST(ColmapKeyframes, TheFinestPixelAngleIsThatOfTheLongestFocalLength) {
+  ColmapTextModel text = ValidModel();
+  EXPECT_DOUBLE_EQ(ColmapFinestPixelAngle(ParseColmapModel(text, "m")), 1.0 / 500.0);
+  text.cameras += "2 SIMPLE_RADIAL 1024 768 800 512 384 0.01\n";
+  EXPECT_DOUBLE_EQ(ColmapFinestPixelAngle(ParseColmapModel(text, "m")), 1.0 / 800.0);
+  EXPECT_EQ(ColmapFinestPixelAngle(ColmapModel()), 0.0);
+}
+
 // A frame point goes to the latest keyframe at or before the last frame that saw it, the first
 // keyframe when it was seen before any; the files' text comes back from the model.
 TEST(ColmapKeyframes, AFramePointGoesToTheKeyframeBeforeItsLastFrame) {

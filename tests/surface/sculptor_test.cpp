@@ -262,7 +262,10 @@ TEST(IncrementalSculptor, OldRayModesGiveTheSameSculpture) {
 // brute force (every old ray walked whole from its point), after every keyframe of a random
 // stream (points scattered in a box, rays to random earlier keyframes): the grid's candidate
 // rays include every old ray that crosses N, and the runs visit exactly its N cells.
-TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream) {
+// A random stream of 16 keyframes, 60 points each (some on common planes, which give degenerate
+// crossings of N's border); near_copies: every third point also comes again 1-3 cm away in the
+// next keyframe with that keyframe's rays (a point the separation merges into a vertex).
+std::vector<SurfaceKeyframe> RandomOldRayStream(bool near_copies) {
   std::mt19937 rng(23);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   std::vector<SurfaceKeyframe> stream;
@@ -285,9 +288,25 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
       p.rays.push_back({kf.id, kf.centre});
       kf.points.push_back(p);
     }
+    if (near_copies && t > 0) {
+      const std::vector<SurfacePoint>& before = stream.back().points;
+      for (size_t i = 0; i < before.size(); i += 3) {
+        SurfacePoint copy = before[i];
+        copy.id = PointId(next_point++);
+        copy.position += 0.01 * Eigen::Vector3d(1.0 + u(rng), u(rng), u(rng));
+        copy.rays = {{kf.id, kf.centre}, {KeyframeId(t - 1), stream.back().centre}};
+        kf.points.push_back(copy);
+      }
+    }
     stream.push_back(kf);
   }
-  SculptorOptions options;
+  return stream;
+}
+
+// Old rays walked over N only (the border index) against every old ray walked whole: the same
+// counters in every cell after every keyframe. Returns the points merged into a vertex.
+size_t ExpectOldRaysGiveTheBruteForceCounters(const std::vector<SurfaceKeyframe>& stream,
+                                              SculptorOptions options) {
   options.scale = 1.0;
   options.filter_points = false;
   options.ray_grid_step_factor = 1.5;
@@ -296,15 +315,18 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
   options.old_rays = OldRayTracing::kNewCellRuns;
   IncrementalSculptor fast(options);
   size_t old_rays = 0, compared = 0, candidates = 0, facets = 0, uncrossed = 0, queries = 0,
-         facet_tests = 0;
+         facet_tests = 0, merged = 0;
   for (const SurfaceKeyframe& kf : stream) {
     const std::vector<KeyframeStats> a = brute.AddKeyframe(kf), b = fast.AddKeyframe(kf);
-    ASSERT_EQ(a.size(), 1u);
-    ASSERT_EQ(b.size(), 1u);
+    EXPECT_EQ(a.size(), 1u);
+    EXPECT_EQ(b.size(), 1u);
+    if (a.size() != 1u || b.size() != 1u) return merged;
     old_rays += a[0].rays_old;
     candidates += b[0].rays_old_candidates;
     facets += b[0].old_ray_facets;
     uncrossed += b[0].old_ray_facets_uncrossed;
+    merged += b[0].points_merged;
+    EXPECT_EQ(a[0].points_merged, b[0].points_merged);
     EXPECT_LE(b[0].rays_old, b[0].rays_old_candidates);
     // Every candidate asks the border index for its crossings (when N has a border to cross).
     if (b[0].old_ray_facets > 0) {
@@ -317,10 +339,12 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
     std::vector<CellKey> cells_fast = fast.triangulation().FiniteCells();
     std::sort(cells.begin(), cells.end());
     std::sort(cells_fast.begin(), cells_fast.end());
-    ASSERT_EQ(cells, cells_fast) << "keyframe " << kf.id.value;
+    EXPECT_EQ(cells, cells_fast) << "keyframe " << kf.id.value;
+    if (cells != cells_fast) return merged;
     for (const CellKey& c : cells) {
-      ASSERT_EQ(brute.triangulation().Counter(c), fast.triangulation().Counter(c))
+      EXPECT_EQ(brute.triangulation().Counter(c), fast.triangulation().Counter(c))
           << "keyframe " << kf.id.value;
+      if (brute.triangulation().Counter(c) != fast.triangulation().Counter(c)) return merged;
       compared += brute.triangulation().Counter(c) > 0 ? 1 : 0;
     }
     EXPECT_EQ(a[0].cells_o, b[0].cells_o);
@@ -337,6 +361,22 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
   EXPECT_GT(uncrossed, facets / 10);
   EXPECT_GT(queries, 0u);
   EXPECT_GT(facet_tests, 0u);
+  return merged;
+}
+
+TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream) {
+  SculptorOptions options;
+  options.pixel_angle = 0.0;  // no merging: every point is its own vertex
+  EXPECT_EQ(ExpectOldRaysGiveTheBruteForceCounters(RandomOldRayStream(false), options), 0u);
+}
+
+// Points merged into a vertex: their rays are walked from it, as old rays too (a ray of a
+// merged point starting in N is found through the vertex's other points).
+TEST(IncrementalSculptor, OldRaysOfPointsMergedIntoAVertexGiveTheBruteForceCounters) {
+  SculptorOptions options;
+  options.min_point_separation_factor = 0.05;  // s = 1: 5 cm, the copies are 1-3.5 cm away
+  const std::vector<SurfaceKeyframe> stream = RandomOldRayStream(true);
+  EXPECT_GT(ExpectOldRaysGiveTheBruteForceCounters(stream, options), 15u * 20u / 2u);
 }
 
 // Paper §5.1 filters, with s = 1: below the ground by more than 3 s, farther than 15 s from the
@@ -674,6 +714,70 @@ TEST(IncrementalSculptor, PointsCloserThanTheSeparationAreOneVertex) {
   EXPECT_GE(apart.float_collisions, merged.duplicates / 2);
 }
 
+// The separation in pixels: with a pixel of 10⁻⁴ rad, a twin 1.5 mm from a point seen from 5 m
+// or more is less than 3 pixels from it, so it is that vertex; its two rays are traced from the
+// vertex (or dropped with duplicate_rays off). Without pixel_angle (unknown camera) only the
+// factor of s holds (1 mm), and the twins are vertices of their own.
+TEST(IncrementalSculptor, PointsAFewPixelsApartAreOneVertexThatKeepsTheirRays) {
+  std::vector<SurfaceKeyframe> drive = testing::NoisyStreet(20, 80, 0.02, 5);
+  size_t twins = 0;
+  for (size_t t = 1; t < drive.size(); ++t) {
+    SurfaceKeyframe& kf = drive[t];
+    const size_t n = kf.points.size();
+    for (size_t i = 0; i < n; i += 4) {
+      SurfacePoint twin = kf.points[i];
+      twin.id = PointId(static_cast<uint32_t>(1000000 + twins++));
+      twin.position += Eigen::Vector3d(0.0015, 0.0, 0.0);
+      twin.rays = {{kf.id, kf.centre}, {drive[t - 1].id, drive[t - 1].centre}};
+      kf.points.push_back(twin);
+    }
+  }
+  struct Run {
+    size_t duplicates = 0, merged = 0, added = 0, rays = 0;
+    TriangleMesh observed;
+  };
+  auto run = [&drive](double pixel_angle, bool duplicate_rays) {
+    SculptorOptions options;
+    options.init_keyframes = 10;
+    options.pixel_angle = pixel_angle;
+    options.min_point_separation_pixels = 3.0;
+    options.duplicate_rays = duplicate_rays;
+    IncrementalSculptor sculptor(options);
+    Run r;
+    auto count = [&r](const std::vector<KeyframeStats>& stats) {
+      for (const KeyframeStats& st : stats) {
+        r.duplicates += st.points_duplicate;
+        r.merged += st.points_merged;
+        r.added += st.points_added;
+        r.rays += st.rays_new;
+      }
+    };
+    for (const SurfaceKeyframe& kf : drive) count(sculptor.AddKeyframe(kf));
+    count(sculptor.Finish());
+    EXPECT_EQ(sculptor.CheckInvariants(), "");
+    r.observed = sculptor.ExtractObservedMesh();
+    return r;
+  };
+  const Run kept = run(1e-4, true), dropped = run(1e-4, false), unknown = run(0.0, true);
+  EXPECT_GE(kept.duplicates, twins / 4) << twins << " twins";
+  EXPECT_LE(kept.duplicates, twins);
+  EXPECT_EQ(kept.merged, kept.duplicates);
+  EXPECT_EQ(dropped.merged, 0u);
+  EXPECT_EQ(dropped.duplicates, kept.duplicates);
+  EXPECT_EQ(dropped.added, kept.added);
+  // Every ray is traced whether its point is a vertex of its own or merged into one (a twin, or
+  // the original when its twin came first); dropping loses at least one ray per merged point.
+  EXPECT_EQ(kept.rays, unknown.rays);
+  EXPECT_GE(kept.rays, dropped.rays + kept.merged);
+  EXPECT_EQ(unknown.duplicates, 0u);
+  EXPECT_EQ(unknown.added, kept.added + kept.duplicates);
+  MeshCheckOptions bounded;
+  bounded.allow_boundary = true;
+  const MeshCheckReport report = CheckMesh(kept.observed, bounded);
+  EXPECT_TRUE(report.ok) << report.Summary();
+  EXPECT_GT(kept.observed.triangles.size(), 100u);
+}
+
 TEST(SculptorOptions, CheckRejectsBadValues) {
   SculptorOptions o;
   EXPECT_EQ(o.Check(), "");
@@ -704,6 +808,12 @@ TEST(SculptorOptions, CheckRejectsBadValues) {
   o = SculptorOptions();
   o.min_point_separation_factor = -1e-3;
   EXPECT_NE(o.Check().find("min_point_separation_factor"), std::string::npos);
+  o = SculptorOptions();
+  o.min_point_separation_pixels = -1.0;
+  EXPECT_NE(o.Check().find("min_point_separation_pixels"), std::string::npos);
+  o = SculptorOptions();
+  o.pixel_angle = 0.2;
+  EXPECT_NE(o.Check().find("pixel_angle"), std::string::npos);
   o.min_aperture_deg = 180.0;
   EXPECT_THROW(IncrementalSculptor{o}, std::invalid_argument);
 }

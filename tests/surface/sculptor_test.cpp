@@ -10,6 +10,7 @@
 #include <array>
 #include <cmath>
 #include <cstdlib>
+#include <functional>
 #include <random>
 #include <set>
 
@@ -657,6 +658,33 @@ TEST(IncrementalSculptor, TheRaysOfPointsWithANarrowApertureCarveShortOfThem) {
   EXPECT_GT(cells_narrow, cells_wide + (rays_narrow - rays_wide));
 }
 
+// The point and ray counts of a sculpting, summed over its steps.
+struct PointCounts {
+  size_t duplicates = 0, merged = 0, added = 0, rays = 0;
+};
+
+// Sculpts the drive (10 keyframes in the batch) and sums its steps' counts; `after` reads the
+// finished sculptor, whose invariants hold.
+PointCounts SculptCountingPoints(const std::vector<SurfaceKeyframe>& drive, SculptorOptions options,
+                                 const std::function<void(const IncrementalSculptor&)>& after) {
+  options.init_keyframes = 10;
+  IncrementalSculptor sculptor(options);
+  PointCounts counts;
+  auto count = [&counts](const std::vector<KeyframeStats>& stats) {
+    for (const KeyframeStats& st : stats) {
+      counts.duplicates += st.points_duplicate;
+      counts.merged += st.points_merged;
+      counts.added += st.points_added;
+      counts.rays += st.rays_new;
+    }
+  };
+  for (const SurfaceKeyframe& kf : drive) count(sculptor.AddKeyframe(kf));
+  count(sculptor.Finish());
+  EXPECT_EQ(sculptor.CheckInvariants(), "");
+  after(sculptor);
+  return counts;
+}
+
 // A quarter of the street's points come twice, 4 nm apart (as in a COLMAP model): by default
 // each twin is the vertex of its original (a duplicate), so no two vertices of T share a
 // position once rounded to the float coordinates of a PLY file, and δO written as floats is
@@ -675,43 +703,35 @@ TEST(IncrementalSculptor, PointsCloserThanTheSeparationAreOneVertex) {
     }
   }
   struct Run {
-    size_t duplicates = 0, added = 0, float_collisions = 0;
+    PointCounts counts;
+    size_t float_collisions = 0;
     TriangleMesh closed;
   };
   auto run = [&drive](double separation_factor) {
     SculptorOptions options;
-    options.init_keyframes = 10;
     options.min_point_separation_factor = separation_factor;
-    IncrementalSculptor sculptor(options);
     Run r;
-    auto count = [&r](const std::vector<KeyframeStats>& stats) {
-      for (const KeyframeStats& st : stats) {
-        r.duplicates += st.points_duplicate;
-        r.added += st.points_added;
+    r.counts = SculptCountingPoints(drive, options, [&r](const IncrementalSculptor& sculptor) {
+      std::set<std::array<float, 3>> positions;
+      const DelaunayMesh& tri = sculptor.triangulation();
+      for (size_t v = 0; v < tri.NumVertices(); ++v) {
+        const Eigen::Vector3f q = tri.Position(static_cast<int>(v)).cast<float>();
+        r.float_collisions += !positions.insert({q.x(), q.y(), q.z()}).second;
       }
-    };
-    for (const SurfaceKeyframe& kf : drive) count(sculptor.AddKeyframe(kf));
-    count(sculptor.Finish());
-    EXPECT_EQ(sculptor.CheckInvariants(), "");
-    std::set<std::array<float, 3>> positions;
-    const DelaunayMesh& tri = sculptor.triangulation();
-    for (size_t v = 0; v < tri.NumVertices(); ++v) {
-      const Eigen::Vector3f q = tri.Position(static_cast<int>(v)).cast<float>();
-      r.float_collisions += !positions.insert({q.x(), q.y(), q.z()}).second;
-    }
-    r.closed = sculptor.ExtractMesh();
-    for (Eigen::Vector3d& q : r.closed.vertices) q = q.cast<float>().cast<double>();
+      r.closed = sculptor.ExtractMesh();
+      for (Eigen::Vector3d& q : r.closed.vertices) q = q.cast<float>().cast<double>();
+    });
     return r;
   };
   const Run merged = run(SculptorOptions().min_point_separation_factor);
   const Run apart = run(0.0);
-  EXPECT_GE(merged.duplicates, twins / 2) << twins << " twins";
+  EXPECT_GE(merged.counts.duplicates, twins / 2) << twins << " twins";
   EXPECT_EQ(merged.float_collisions, 0u);
   const MeshCheckReport report = CheckMesh(merged.closed);
   EXPECT_TRUE(report.ok) << report.Summary();
-  EXPECT_EQ(apart.duplicates, 0u);
-  EXPECT_GT(apart.added, merged.added);
-  EXPECT_GE(apart.float_collisions, merged.duplicates / 2);
+  EXPECT_EQ(apart.counts.duplicates, 0u);
+  EXPECT_GT(apart.counts.added, merged.counts.added);
+  EXPECT_GE(apart.float_collisions, merged.counts.duplicates / 2);
 }
 
 // The separation in pixels: with a pixel of 10⁻⁴ rad, a twin 1.5 mm from a point seen from 5 m
@@ -733,44 +753,33 @@ TEST(IncrementalSculptor, PointsAFewPixelsApartAreOneVertexThatKeepsTheirRays) {
     }
   }
   struct Run {
-    size_t duplicates = 0, merged = 0, added = 0, rays = 0;
+    PointCounts counts;
     TriangleMesh observed;
   };
   auto run = [&drive](double pixel_angle, bool duplicate_rays) {
     SculptorOptions options;
-    options.init_keyframes = 10;
     options.pixel_angle = pixel_angle;
     options.min_point_separation_pixels = 3.0;
     options.duplicate_rays = duplicate_rays;
-    IncrementalSculptor sculptor(options);
     Run r;
-    auto count = [&r](const std::vector<KeyframeStats>& stats) {
-      for (const KeyframeStats& st : stats) {
-        r.duplicates += st.points_duplicate;
-        r.merged += st.points_merged;
-        r.added += st.points_added;
-        r.rays += st.rays_new;
-      }
-    };
-    for (const SurfaceKeyframe& kf : drive) count(sculptor.AddKeyframe(kf));
-    count(sculptor.Finish());
-    EXPECT_EQ(sculptor.CheckInvariants(), "");
-    r.observed = sculptor.ExtractObservedMesh();
+    r.counts = SculptCountingPoints(drive, options, [&r](const IncrementalSculptor& sculptor) {
+      r.observed = sculptor.ExtractObservedMesh();
+    });
     return r;
   };
   const Run kept = run(1e-4, true), dropped = run(1e-4, false), unknown = run(0.0, true);
-  EXPECT_GE(kept.duplicates, twins / 4) << twins << " twins";
-  EXPECT_LE(kept.duplicates, twins);
-  EXPECT_EQ(kept.merged, kept.duplicates);
-  EXPECT_EQ(dropped.merged, 0u);
-  EXPECT_EQ(dropped.duplicates, kept.duplicates);
-  EXPECT_EQ(dropped.added, kept.added);
+  EXPECT_GE(kept.counts.duplicates, twins / 4) << twins << " twins";
+  EXPECT_LE(kept.counts.duplicates, twins);
+  EXPECT_EQ(kept.counts.merged, kept.counts.duplicates);
+  EXPECT_EQ(dropped.counts.merged, 0u);
+  EXPECT_EQ(dropped.counts.duplicates, kept.counts.duplicates);
+  EXPECT_EQ(dropped.counts.added, kept.counts.added);
   // Every ray is traced whether its point is a vertex of its own or merged into one (a twin, or
   // the original when its twin came first); dropping loses at least one ray per merged point.
-  EXPECT_EQ(kept.rays, unknown.rays);
-  EXPECT_GE(kept.rays, dropped.rays + kept.merged);
-  EXPECT_EQ(unknown.duplicates, 0u);
-  EXPECT_EQ(unknown.added, kept.added + kept.duplicates);
+  EXPECT_EQ(kept.counts.rays, unknown.counts.rays);
+  EXPECT_GE(kept.counts.rays, dropped.counts.rays + kept.counts.merged);
+  EXPECT_EQ(unknown.counts.duplicates, 0u);
+  EXPECT_EQ(unknown.counts.added, kept.counts.added + kept.counts.duplicates);
   MeshCheckOptions bounded;
   bounded.allow_boundary = true;
   const MeshCheckReport report = CheckMesh(kept.observed, bounded);

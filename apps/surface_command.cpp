@@ -510,8 +510,8 @@ void AddCarvingOptions(CLI::App* command, SculptorOptions* sculptor) {
       ->capture_default_str();
   command->add_flag_callback(
       "--drop-duplicate-rays", [sculptor] { sculptor->duplicate_rays = false; },
-      "A point merged into a vertex (--min-point-separation) is dropped with its rays (default: "
-      "its rays are traced from that vertex)");
+      "A point merged into a vertex (--min-point-separation, --min-point-separation-pixels) is "
+      "dropped with its rays (default: its rays are traced from that vertex)");
   command
       ->add_option("--reach-quantile", sculptor->reach_quantile,
                    "s is at least the first keyframes' points' distance to their keyframe at "

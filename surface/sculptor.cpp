@@ -542,9 +542,8 @@ struct IncrementalSculptor::Impl {
   }
 
   // Inserts p unless its conflict zone meets O (§4.3). Returns the new vertex, or a null handle
-  // (rejected) with *duplicate telling whether p is an existing vertex.
-  // *duplicate: p is an existing vertex, or closer than `separation` to one; *merged_into is
-  // then that vertex.
+  // with *duplicate telling whether p is an existing vertex or closer than `separation` to one
+  // (then *merged_into is that vertex) rather than rejected.
   VertexHandle InsertFree(const Point& p, double separation, CellHandle& hint, bool* duplicate,
                           VertexHandle* merged_into, KeyframeStats* verify_stats = nullptr) {
     *duplicate = false;

@@ -271,7 +271,7 @@ struct KeyframeStats {
   size_t points_filtered = 0;   // removed by the §5.1 filters: the sum of the four below
   size_t points_added = 0;      // inserted in T
   size_t points_rejected = 0;   // conflict zone met O (§4.3)
-  size_t points_duplicate = 0;  // an existing vertex, or within min_point_separation_factor · s
+  size_t points_duplicate = 0;  // an existing vertex, or within the separation of one
   size_t points_merged = 0;     // of the duplicates, those whose rays were kept (duplicate_rays)
   size_t steiner_added = 0;
   size_t rays_new = 0;                           // rays of the new points, traced fully

@@ -264,7 +264,7 @@ TEST(IncrementalSculptor, OldRayModesGiveTheSameSculpture) {
 // stream (points scattered in a box, rays to random earlier keyframes): the grid's candidate
 // rays include every old ray that crosses N, and the runs visit exactly its N cells.
 // A random stream of 16 keyframes, 60 points each (some on common planes, which give degenerate
-// crossings of N's border); near_copies: every third point also comes again 1-3 cm away in the
+// crossings of N's border); near_copies: every third point also comes again 1-2.5 cm away in the
 // next keyframe with that keyframe's rays (a point the separation merges into a vertex).
 std::vector<SurfaceKeyframe> RandomOldRayStream(bool near_copies) {
   std::mt19937 rng(23);
@@ -375,7 +375,7 @@ TEST(IncrementalSculptor, OldRayTracingGivesTheBruteForceCountersOnARandomStream
 // merged point starting in N is found through the vertex's other points).
 TEST(IncrementalSculptor, OldRaysOfPointsMergedIntoAVertexGiveTheBruteForceCounters) {
   SculptorOptions options;
-  options.min_point_separation_factor = 0.05;  // s = 1: 5 cm, the copies are 1-3.5 cm away
+  options.min_point_separation_factor = 0.05;  // s = 1: 5 cm, the copies are 1-2.5 cm away
   const std::vector<SurfaceKeyframe> stream = RandomOldRayStream(true);
   EXPECT_GT(ExpectOldRaysGiveTheBruteForceCounters(stream, options), 15u * 20u / 2u);
 }
